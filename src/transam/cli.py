@@ -1,0 +1,212 @@
+"""The ``transam`` command: typed subcommands (tyro), one dataclass each with a ``run`` method."""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import time
+from dataclasses import dataclass
+from typing import Annotated, Literal
+
+import tyro
+from rich.console import Console
+from rich.table import Table
+
+EnvName = Literal["tag", "spread", "overcooked", "lbf"]
+ALL_ENVS: tuple[EnvName, ...] = ("tag", "spread", "overcooked", "lbf")
+
+console = Console()
+
+
+def _setup_jax() -> None:
+    """CPU unless the user chose otherwise; persistent compilation cache on."""
+    from transam.jaxcache import enable_compilation_cache
+
+    enable_compilation_cache()
+
+
+@dataclass
+class EnvsList:
+    """Print each environment's metadata (sizes, episode length, partner population)."""
+
+    def run(self) -> None:
+        from transam import envs
+
+        table = Table(title="transam environments (controlled agent's view)")
+        for col in (
+            "env",
+            "obs",
+            "actions",
+            "others",
+            "other obs",
+            "other actions",
+            "episode",
+            "partners",
+            "description",
+        ):
+            table.add_column(col, overflow="fold")
+        for name in ALL_ENVS:
+            env = envs.make(name)
+            s = env.spec
+            table.add_row(
+                name,
+                str(s.obs_dim),
+                f"{s.num_actions} ({', '.join(s.action_names)})",
+                str(s.num_others),
+                str(s.other_obs_dim),
+                str(s.other_num_actions),
+                str(s.episode_len),
+                f"{env.num_partners} ({env.population.name})",
+                s.description,
+            )
+        console.print(table)
+
+
+@dataclass
+class EnvsBench:
+    """Steps/s of each environment: random controlled actions, heuristic partners, vmapped copies.
+
+    Steps are controlled-agent steps summed over the copies; the median of the timed repeats is
+    reported (compilation excluded).
+    """
+
+    envs: tuple[EnvName, ...] = ALL_ENVS
+    """environments to time"""
+    num_envs: int = 1024
+    """vmapped environment copies"""
+    steps: int = 200
+    """steps per timed rollout"""
+    repeats: int = 5
+    """timed rollouts per environment"""
+
+    def run(self) -> None:
+        from transam import envs
+        from transam.envs.rollout import steps_per_second
+
+        _check_positive(num_envs=self.num_envs, steps=self.steps, repeats=self.repeats)
+        table = Table(
+            title=f"env steps/s, {self.num_envs} copies, {self.steps} steps x "
+            f"{self.repeats} repeats, {os.cpu_count()} CPU cores"
+        )
+        for col in ("env", "median steps/s", "min", "max"):
+            table.add_column(col, justify="right")
+        for name in self.envs:
+            rates = steps_per_second(envs.make(name), self.num_envs, self.steps, self.repeats)
+            table.add_row(
+                name, f"{statistics.median(rates):,.0f}", f"{min(rates):,.0f}", f"{max(rates):,.0f}"
+            )
+        console.print(table)
+
+
+@dataclass
+class Demo:
+    """Roll out every environment with its partner population and a random controlled agent,
+    and print each partner team's episode returns."""
+
+    envs: tuple[EnvName, ...] = ALL_ENVS
+    """environments to roll out"""
+    episodes: int = 20
+    """episodes per parallel copy (about episodes x copies / teams per team)"""
+    num_envs: int = 64
+    """parallel environment copies"""
+    seed: int = 0
+    """PRNG seed"""
+
+    def run(self) -> None:
+        import jax
+        import numpy as np
+
+        from transam import envs
+        from transam.envs.rollout import episode_stats, make_random_rollout
+
+        _check_positive(episodes=self.episodes, num_envs=self.num_envs)
+        summary = Table(title="random controlled agent vs each partner population")
+        for col in (
+            "env",
+            "teams",
+            "episodes",
+            "mean return",
+            "std",
+            "worst team",
+            "best team",
+            "seconds",
+        ):
+            summary.add_column(col, justify="right")
+        for name in self.envs:
+            start = time.perf_counter()
+            env = envs.make(name)
+            steps = self.episodes * env.spec.episode_len
+            _, ts = make_random_rollout(env, self.num_envs, steps)(jax.random.key(self.seed))
+            stats = episode_stats(ts)
+            per_team = stats.by_partner(env.num_partners)
+            table = Table(title=f"{name}: {env.population.name} population")
+            for col in ("team", "episodes", "mean return", "std"):
+                table.add_column(col, justify="right")
+            means = []
+            for team, r in zip(env.population.team_names, per_team, strict=True):
+                means.append(float(r.mean()) if len(r) else float("nan"))
+                table.add_row(
+                    team,
+                    str(len(r)),
+                    f"{means[-1]:.3f}",
+                    f"{float(r.std()) if len(r) else float('nan'):.3f}",
+                )
+            console.print(table)
+            summary.add_row(
+                name,
+                str(env.num_partners),
+                str(len(stats.returns)),
+                f"{stats.returns.mean():.3f}",
+                f"{stats.returns.std():.3f}",
+                f"{np.nanmin(means):.3f}",
+                f"{np.nanmax(means):.3f}",
+                f"{time.perf_counter() - start:.1f}",
+            )
+        console.print(summary)
+
+
+def _check_positive(**values: int) -> None:
+    for key, value in values.items():
+        if value < 1:
+            raise SystemExit(f"error: --{key.replace('_', '-')} must be >= 1, got {value}")
+
+
+@dataclass
+class Envs:
+    """Environment commands: list metadata, benchmark throughput."""
+
+    cmd: (
+        Annotated[EnvsList, tyro.conf.subcommand("list")]
+        | Annotated[EnvsBench, tyro.conf.subcommand("bench")]
+    )
+
+    def run(self) -> None:
+        self.cmd.run()
+
+
+Command = (
+    Annotated[Demo, tyro.conf.subcommand("demo")] | Annotated[Envs, tyro.conf.subcommand("envs")]
+)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``transam`` console script."""
+    cmd = tyro.cli(
+        Command,
+        prog="transam",
+        args=sys.argv[1:] if argv is None else argv,
+        config=(tyro.conf.OmitSubcommandPrefixes,),
+        description="TransAM: transformer-based agent modeling for multi-agent RL (JAX).",
+    )
+    _setup_jax()
+    from transam.envs import EnvError
+
+    try:
+        cmd.run()
+    except EnvError as err:
+        raise SystemExit(f"error: {err}") from None
+
+
+if __name__ == "__main__":
+    main()
