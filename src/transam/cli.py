@@ -34,33 +34,30 @@ class EnvsList:
         from transam import envs
 
         table = Table(title="transam environments (controlled agent's view)")
-        for col in (
-            "env",
-            "obs",
-            "actions",
-            "others",
-            "other obs",
-            "other actions",
-            "episode",
-            "partners",
-            "description",
-        ):
-            table.add_column(col, overflow="fold")
+        for col in ("env", "obs", "acts", "others", "other obs", "other acts", "steps", "teams"):
+            table.add_column(col, no_wrap=True, justify="left" if col == "env" else "right")
+        notes = []
         for name in ALL_ENVS:
             env = envs.make(name)
             s = env.spec
             table.add_row(
                 name,
                 str(s.obs_dim),
-                f"{s.num_actions} ({', '.join(s.action_names)})",
+                str(s.num_actions),
                 str(s.num_others),
                 str(s.other_obs_dim),
                 str(s.other_num_actions),
                 str(s.episode_len),
-                f"{env.num_partners} ({env.population.name})",
-                s.description,
+                str(env.num_partners),
+            )
+            notes.append(
+                f"[bold]{name}[/bold]: {s.description}. Actions: "
+                f"{', '.join(f'{i}={a}' for i, a in enumerate(s.action_names))}. "
+                f"Population {env.population.name!r}: {', '.join(env.population.team_names)}."
             )
         console.print(table)
+        for note in notes:
+            console.print(note)
 
 
 @dataclass

@@ -1,0 +1,153 @@
+"""Spread: MPE cooperative navigation (3 agents, 3 landmarks) with one controlled agent.
+
+Source: the dynamics and observations of PettingZoo/mpe2 ``simple_spread_v3`` (N=3), through
+JaxMARL 0.2.0's :class:`~jaxmarl.environments.mpe.simple_spread.SimpleSpreadMPE`, which this
+module wraps (its reset, physics step, observations and local-ratio reward are used as they are).
+A test checks every observation and reward against mpe2 on random episodes.
+
+* Agents: radius 0.15, colliding (soft contact force 100, margin 1e-3), accel 5, no speed cap;
+  landmarks: radius 0.05, not colliding. dt 0.1, damping 0.25, position updated before velocity.
+  Positions of agents and landmarks start U(-1, 1)^2, velocities 0. No walls.
+* Actions (all agents): Discrete(5) = 0 no-op, 1 -x, 2 +x, 3 -y, 4 +y.
+* Observation (18, every agent): [own vel (2), own pos (2), the 3 landmarks relative to self (6),
+  the 2 other agents relative to self in index order (4), their communication (4, always 0)].
+* Controlled agent: index 2 (as the TransAM authors' code); the partners are agents 0 and 1, and
+  ``other_obs`` rows are their observations in that order.
+* Episode: exactly ``episode_len`` = 25 transitions, counted by :class:`ControlledEnv` (JaxMARL's
+  own ``done`` would come one step late and is ignored); there is no early termination.
+* Reward (``Config.reward``):
+  - ``"mpe"`` (default): the original MPE cooperative-navigation reward of the controlled agent
+    (openai multiagent-particle-envs ``simple_spread.Scenario.reward``): minus the sum over
+    landmarks of the distance to the closest agent, minus 1 for every agent within 0.3 (sum of
+    radii) of the controlled agent, the controlled agent itself included as the openai code does
+    (a constant -1 per step; ``self_collision=False`` drops it). It is the controlled agent's own
+    reward, not openai's ``collaborative`` sum over the three agents. Returns are on the paper's
+    scale (TransAM -48.8): against the default population, random play scores about -61 per
+    episode (-54 to -70 by team) and the best landmark heuristic about -46 to -58 by team.
+  - ``"pettingzoo"``: mpe2 simple_spread_v3's reward, ``local_ratio * (-collisions with the other
+    agents) + (1 - local_ratio) * (-sum of closest distances)`` with local_ratio 0.5 (JaxMARL's
+    ``rewards``). With 0.5 it is exactly ``0.5 * (mpe + 1)`` per step.
+* Precision: float32 here, float64 in mpe2; observations agree to about 3e-6 over 25 steps.
+* Partners: the heuristic population of :mod:`transam.partners.spread` by default.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+
+from transam._quiet import quiet
+from transam.envs.core import ControlledEnv, EnvError, GameSpec
+from transam.partners.moves import MPE_ACTION_NAMES
+from transam.partners.population import Population
+
+with quiet():
+    from jaxmarl.environments.mpe.simple import State
+    from jaxmarl.environments.mpe.simple_spread import SimpleSpreadMPE
+
+NUM_AGENTS = 3
+NUM_LANDMARKS = 3
+OBS_DIM = 18
+CONTROLLED = 2  # the controlled agent's index; the partners are the others in index order
+
+# Observation layout (every agent).
+VEL, POS, LANDMARKS, OTHERS, COMM = (
+    slice(0, 2),
+    slice(2, 4),
+    slice(4, 10),
+    slice(10, 14),
+    slice(14, 18),
+)
+
+
+@dataclass(frozen=True)
+class Config:
+    """Spread options."""
+
+    reward: Literal["mpe", "pettingzoo"] = "mpe"  # original MPE per-agent reward, or mpe2 v3's
+    self_collision: bool = True  # "mpe" reward: the agent counts as colliding with itself (-1/step)
+    local_ratio: float = 0.5  # "pettingzoo" reward: weight of the local collision term
+    episode_len: int = 25  # transitions per episode (no early termination)
+
+    def __post_init__(self) -> None:
+        if self.reward not in ("mpe", "pettingzoo"):
+            raise EnvError(f"spread reward must be 'mpe' or 'pettingzoo'; got {self.reward!r}")
+        if not 0.0 <= self.local_ratio <= 1.0:
+            raise EnvError(f"spread local_ratio must be in [0, 1]; got {self.local_ratio!r}")
+        if self.episode_len < 1:
+            raise EnvError(f"spread episode_len must be >= 1; got {self.episode_len!r}")
+
+
+class SpreadGame:
+    """simple_spread_v3 seen from agent 2; the state is JaxMARL's MPE ``State``."""
+
+    def __init__(self, config: Config) -> None:
+        self.config = config
+        self.mpe = SimpleSpreadMPE(
+            num_agents=NUM_AGENTS, num_landmarks=NUM_LANDMARKS, local_ratio=config.local_ratio
+        )
+        self.spec = GameSpec(
+            name="spread",
+            obs_dim=OBS_DIM,
+            num_actions=5,
+            num_others=NUM_AGENTS - 1,
+            other_obs_dim=OBS_DIM,
+            other_num_actions=5,
+            episode_len=config.episode_len,
+            action_names=MPE_ACTION_NAMES,
+            description="MPE cooperative navigation (mpe2 simple_spread_v3), controlled agent 2",
+        )
+
+    def reset(self, key: jax.Array) -> State:
+        _, state = self.mpe.reset(key)
+        return state
+
+    def observe(self, state: State) -> tuple[jax.Array, jax.Array]:
+        obs = self.mpe.get_obs(state)
+        rows = [obs[a].astype(jnp.float32) for a in self.mpe.agents]
+        others = jnp.stack([r for i, r in enumerate(rows) if i != CONTROLLED])
+        return rows[CONTROLLED], others
+
+    def transition(
+        self, key: jax.Array, state: State, action: jax.Array, other_actions: jax.Array
+    ) -> tuple[State, jax.Array, jax.Array]:
+        others = jnp.asarray(other_actions, jnp.int32)
+        mine = jnp.asarray(action, jnp.int32)[None]
+        joint = jnp.concatenate([others[:CONTROLLED], mine, others[CONTROLLED:]])
+        actions = {a: joint[i] for i, a in enumerate(self.mpe.agents)}
+        _, next_state, _, _, _ = self.mpe.step_env(key, state, actions)
+        return next_state, self.reward(next_state), jnp.zeros((), bool)
+
+    def reward(self, state: State) -> jax.Array:
+        """The controlled agent's reward in ``state`` (the state after the joint move)."""
+        if self.config.reward == "pettingzoo":
+            r = self.mpe.rewards(state)[self.mpe.agents[CONTROLLED]]
+            return jnp.asarray(r, jnp.float32)
+        return self.mpe_reward(state)
+
+    def mpe_reward(self, state: State) -> jax.Array:
+        """Original MPE cooperative-navigation reward of the controlled agent (module doc)."""
+        agents = state.p_pos[:NUM_AGENTS]
+        landmarks = state.p_pos[NUM_AGENTS:]
+        dists = jnp.linalg.norm(agents[None, :, :] - landmarks[:, None, :], axis=-1)  # [L, A]
+        cover = -jnp.sum(jnp.min(dists, axis=1))
+        radius = self.mpe.rad[:NUM_AGENTS]
+        touching = jnp.linalg.norm(agents - agents[CONTROLLED], axis=-1) < (
+            radius + radius[CONTROLLED]
+        )
+        counted = jnp.arange(NUM_AGENTS) != CONTROLLED
+        if self.config.self_collision:
+            counted = jnp.ones(NUM_AGENTS, bool)
+        return (cover - jnp.sum(touching & counted)).astype(jnp.float32)
+
+
+def make_env(config: Config, population: Population | None = None) -> ControlledEnv:
+    """Spread with ``config``; the heuristic partner population unless one is given."""
+    if population is None:
+        from transam.partners.spread import heuristic_population
+
+        population = heuristic_population(config)
+    return ControlledEnv(SpreadGame(config), population)

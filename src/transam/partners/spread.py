@@ -1,0 +1,110 @@
+"""Heuristic Spread partners: landmark seekers, and the default population built from them.
+
+Each heuristic reads the landmark offsets from its own observation (slots 4:10, landmark k at
+4+2k) and takes the one-axis step of :func:`~transam.partners.moves.move_toward` toward its
+target, led by its own velocity: it steers at ``offset - LEAD * velocity`` (LEAD = 0.2 s), the
+point it is heading for rather than where it is. Plain bang-bang steering (LEAD = 0) overshoots
+and circles its landmark at about 0.27 on average; with the lead it settles within about 0.07
+(three agents splitting the landmarks this way score about -46 per episode on the default
+reward, close to the paper's -49). They never choose no-op. Deterministic: the key is unused.
+
+* ``first`` / ``second`` / ``third``: go to landmark 0 / 1 / 2.
+* ``closest``: go to the landmark nearest to this agent (re-chosen every step).
+* ``farthest``: go to the landmark farthest from this agent (re-chosen every step, so it
+  wanders between landmarks as it approaches one).
+
+Default population (13 teams, slot 0 = agent 0, slot 1 = agent 1), chosen so that the best
+response of the controlled agent differs across teams:
+
+* split teams ``first+second``, ``second+third``, ``third+first``: the partners cover two
+  distinct landmarks; the controlled agent should take the remaining one.
+* crowd teams ``first+first``, ``second+second``, ``third+third``: both partners pile onto one
+  landmark (and collide); two landmarks are left, the controlled agent covers the nearer one.
+* adaptive teams ``closest+closest``, ``farthest+farthest``, ``closest+farthest``: targets
+  depend on where the partners spawned.
+* mixed teams ``first+closest``, ``closest+second``, ``third+farthest``, ``farthest+first``: one
+  fixed and one adaptive partner, in both slot orders.
+
+RL partners (IPPO/MAPPO at several skill levels) join in a later issue.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from transam.envs.spread import LANDMARKS, NUM_LANDMARKS, VEL, Config
+from transam.partners.moves import move_toward
+from transam.partners.population import Member, PolicyFn, Population, Team
+
+LEAD = 0.2  # seconds of own velocity subtracted from the target offset (damps overshoot)
+
+
+def landmark_offsets(obs: jax.Array) -> jax.Array:
+    """[3, 2] landmark positions relative to the observing agent."""
+    return obs[LANDMARKS].reshape(NUM_LANDMARKS, 2)
+
+
+def steer(obs: jax.Array, offset: jax.Array, lead: float) -> jax.Array:
+    """The move toward ``offset``, corrected for the distance the agent will coast."""
+    return move_toward(offset - lead * obs[VEL])
+
+
+def go_to(k: int, lead: float = LEAD) -> PolicyFn:
+    """Policy heading for landmark ``k``."""
+
+    def act(key: jax.Array, obs: jax.Array) -> jax.Array:
+        del key
+        return steer(obs, landmark_offsets(obs)[k], lead)
+
+    return act
+
+
+def go_to_ranked(farthest: bool, lead: float = LEAD) -> PolicyFn:
+    """Policy heading for the nearest (or farthest) landmark from this agent."""
+
+    def act(key: jax.Array, obs: jax.Array) -> jax.Array:
+        del key
+        offsets = landmark_offsets(obs)
+        dist2 = jnp.sum(offsets**2, axis=-1)
+        k = jnp.argmax(dist2) if farthest else jnp.argmin(dist2)
+        return steer(obs, offsets[k], lead)
+
+    return act
+
+
+HEURISTICS: dict[str, PolicyFn] = {
+    "first": go_to(0),
+    "second": go_to(1),
+    "third": go_to(2),
+    "closest": go_to_ranked(farthest=False),
+    "farthest": go_to_ranked(farthest=True),
+}
+
+DEFAULT_TEAMS: tuple[tuple[str, str], ...] = (
+    ("first", "second"),
+    ("second", "third"),
+    ("third", "first"),
+    ("first", "first"),
+    ("second", "second"),
+    ("third", "third"),
+    ("closest", "closest"),
+    ("farthest", "farthest"),
+    ("closest", "farthest"),
+    ("first", "closest"),
+    ("closest", "second"),
+    ("third", "farthest"),
+    ("farthest", "first"),
+)
+
+
+def heuristic_members() -> list[Member]:
+    """The five landmark seekers as population members."""
+    return [Member(name, fn) for name, fn in HEURISTICS.items()]
+
+
+def heuristic_population(config: Config | None = None) -> Population:
+    """The default Spread population: the 13 heuristic teams of the module doc."""
+    del config  # the heuristics read observations only; no option changes them
+    teams = [Team(f"{a}+{b}", (a, b)) for a, b in DEFAULT_TEAMS]
+    return Population("spread-heuristic", heuristic_members(), teams)

@@ -1,0 +1,131 @@
+"""Tag predators: LIAM's four heuristics and its table of 10 joint policies.
+
+The heuristics follow LIAM's ``pretrained_predators.py`` by movement meaning (never the fork's
+mirrored action indices). Each reads its own 16-dim predator observation, in which 8:10 and
+10:12 are the other two predators and 12:14 the prey (all relative), and never picks no-op:
+
+* ``after_prey``: toward the prey; the x axis only when ``|dx| > |dy|`` (strict, as LIAM's).
+* ``after_agent_far``: of the six numbers obs[8:14], the one of largest magnitude decides the
+  axis (x for an even index) and the direction (its sign): toward whoever is farthest along one
+  axis.
+* ``after_agent_close``: toward the nearest of (predator A, predator B, prey) by squared
+  distance (first one on ties).
+* ``after_pred``: toward one of the two other predators, re-drawn uniformly EVERY step from the
+  key it is given (stochastic).
+
+Population. LIAM draws one of 10 teams per episode from a 10 x 3 table over a pool of the four
+heuristics, three IA2C and three MADDPG predators (spec 2.7). We keep that table; its six
+learned entries are named by slot key (``rl_a0..2`` for LIAM's IA2C agents 0-2, ``rl_b0..2`` for
+its MADDPG agents 0-2; our own RL predators take these places later). Until they exist,
+:func:`liam_population` fills each learned key with a fixed heuristic stand-in
+(:data:`STAND_INS`). The stand-ins were chosen so that the 10 teams are 10 different MULTISETS
+of heuristics (predators are interchangeable, so a team is only distinguishable by what it
+contains) and each heuristic appears 7 or 8 times in the 30 slots. Pass ``learned={key:
+Member}`` to swap learned predators in; team names (``liam0``..``liam9`` = LIAM's task ids) do
+not change.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+
+from transam.partners.moves import DOWN, LEFT, RIGHT, UP, move_toward
+from transam.partners.population import Member, Population, Team
+
+if TYPE_CHECKING:
+    from transam.envs.tag import Config
+
+PRED_A, PRED_B, PREY_REL = slice(8, 10), slice(10, 12), slice(12, 14)
+
+
+def after_prey(key: jax.Array, obs: jax.Array) -> jax.Array:
+    """Chase the prey; ties between |dx| and |dy| go to the y axis (LIAM's strict >)."""
+    del key
+    return move_toward(obs[PREY_REL], strict=True)
+
+
+def after_agent_far(key: jax.Array, obs: jax.Array) -> jax.Array:
+    """Move along the single largest relative coordinate among the others (toward its sign)."""
+    del key
+    rel = obs[8:14]
+    i = jnp.argmax(jnp.abs(rel))
+    v = rel[i]
+    along_x = i % 2 == 0
+    return jnp.where(along_x, jnp.where(v >= 0, RIGHT, LEFT), jnp.where(v >= 0, UP, DOWN)).astype(
+        jnp.int32
+    )
+
+
+def after_agent_close(key: jax.Array, obs: jax.Array) -> jax.Array:
+    """Move toward the nearest other agent (predator or prey)."""
+    del key
+    targets = jnp.stack([obs[PRED_A], obs[PRED_B], obs[PREY_REL]])
+    nearest = jnp.argmin(jnp.sum(jnp.square(targets), axis=-1))
+    return move_toward(targets[nearest])
+
+
+def after_pred(key: jax.Array, obs: jax.Array) -> jax.Array:
+    """Move toward one of the two other predators, drawn afresh every step."""
+    pick_b = jax.random.bernoulli(key)
+    return move_toward(jnp.where(pick_b, obs[PRED_B], obs[PRED_A]))
+
+
+HEURISTICS: tuple[Member, ...] = (
+    Member("after_prey", after_prey),
+    Member("after_agent_far", after_agent_far),
+    Member("after_agent_close", after_agent_close),
+    Member("after_pred", after_pred),
+)
+
+LEARNED_SLOTS = ("rl_a0", "rl_a1", "rl_a2", "rl_b0", "rl_b1", "rl_b2")
+"""Learned-predator keys: rl_a<i> stands where LIAM has IA2C agent i, rl_b<i> MADDPG agent i."""
+
+LIAM_TABLE: tuple[tuple[str, str, str], ...] = (
+    ("after_agent_far", "rl_b1", "after_prey"),
+    ("after_agent_close", "rl_a1", "rl_b1"),
+    ("after_pred", "after_prey", "after_agent_far"),
+    ("rl_b1", "rl_b1", "rl_b2"),
+    ("rl_a2", "after_prey", "after_agent_far"),
+    ("rl_b0", "after_pred", "rl_a0"),
+    ("rl_b0", "after_agent_far", "after_agent_close"),
+    ("after_pred", "rl_b0", "after_pred"),
+    ("rl_b2", "after_pred", "rl_a1"),
+    ("after_prey", "rl_a0", "rl_a2"),
+)
+"""LIAM's 10 teams (task ids 0-9), predator slots 0, 1, 2 (spec 2.7)."""
+
+STAND_INS: dict[str, str] = {
+    "rl_a0": "after_agent_close",
+    "rl_a1": "after_prey",
+    "rl_a2": "after_prey",
+    "rl_b0": "after_agent_far",
+    "rl_b1": "after_agent_close",
+    "rl_b2": "after_pred",
+}
+"""The heuristic that fills each learned slot until learned predators exist."""
+
+
+def liam_population(
+    learned: Mapping[str, Member] | None = None, name: str = "tag-liam"
+) -> Population:
+    """LIAM's 10 teams; learned slots from ``learned`` where given, else their stand-ins."""
+    learned = dict(learned or {})
+    unknown = sorted(set(learned) - set(LEARNED_SLOTS))
+    if unknown:
+        raise ValueError(f"unknown learned slot(s) {unknown}; valid: {list(LEARNED_SLOTS)}")
+    fill = {k: learned[k].name if k in learned else STAND_INS[k] for k in LEARNED_SLOTS}
+    members = list(HEURISTICS) + list({m.name: m for m in learned.values()}.values())
+    teams = [
+        Team(f"liam{i}", tuple(fill.get(s, s) for s in row)) for i, row in enumerate(LIAM_TABLE)
+    ]
+    return Population(name, members, teams)
+
+
+def heuristic_population(config: Config | None = None) -> Population:
+    """The default Tag population: LIAM's table with heuristic stand-ins for learned slots."""
+    del config  # the heuristics do not depend on the game settings
+    return liam_population(name="tag-heuristic")

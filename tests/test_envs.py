@@ -1,0 +1,97 @@
+"""Properties every paper environment must have, checked on each of them."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from transam import envs
+from transam.envs.core import ControlledEnv, EnvError
+from transam.envs.rollout import make_random_rollout
+
+
+@pytest.fixture(scope="module", params=envs.ENV_NAMES)
+def env(request: pytest.FixtureRequest) -> ControlledEnv:
+    return envs.make(request.param)
+
+
+def test_unknown_env_names_the_choices() -> None:
+    with pytest.raises(EnvError, match=r"unknown environment 'pong'.*tag, spread, overcooked, lbf"):
+        envs.make("pong")
+
+
+def test_spec_matches_arrays(env: ControlledEnv) -> None:
+    s = env.spec
+    state, obs = env.reset(jax.random.key(0))
+    assert obs.shape == (s.obs_dim,) and obs.dtype == jnp.float32
+    assert state.other_obs.shape == (s.num_others, s.other_obs_dim)
+    assert state.other_obs.dtype == jnp.float32
+    assert len(s.action_names) == s.num_actions and s.episode_len > 0
+    assert env.population.num_others == s.num_others and env.num_partners >= 2
+    _, ts = env.step(jax.random.key(1), state, jnp.int32(0))
+    assert ts.record.other_actions.shape == (s.num_others,)
+    assert ts.record.other_actions.dtype == jnp.int32
+    assert ts.reward.shape == () and ts.reward.dtype == jnp.float32
+    acts = np.asarray(ts.record.other_actions)
+    assert np.all((acts >= 0) & (acts < s.other_num_actions))
+
+
+def test_rollout_across_episode_ends(env: ControlledEnv) -> None:
+    """Clock, partner and record stay consistent when episode ends fall inside a rollout."""
+    length = env.spec.episode_len
+    steps = 2 * length + 3
+
+    def run(key: jax.Array):  # type: ignore[no-untyped-def]
+        k0, k1 = jax.random.split(key)
+        state, _ = env.reset(k0)
+
+        def body(state, key):  # type: ignore[no-untyped-def]
+            ka, ks = jax.random.split(key)
+            action = jax.random.randint(ka, (), 0, env.spec.num_actions)
+            nxt, ts = env.step(ks, state, action)
+            return nxt, (state, ts)
+
+        return jax.lax.scan(body, state, jax.random.split(k1, steps))
+
+    _, (before, ts) = jax.jit(run)(jax.random.key(3))
+    t, done = np.asarray(ts.record.t), np.asarray(ts.done)
+    partner = np.asarray(ts.record.partner)
+    assert t[0] == 0 and done.sum() >= 2
+    for k in range(steps - 1):
+        assert t[k + 1] == (0 if done[k] else t[k] + 1), k
+        if not done[k]:
+            assert partner[k + 1] == partner[k], k  # never changes inside an episode
+    assert np.all(t < length) and np.all(done[t == length - 1])
+    np.testing.assert_array_equal(np.asarray(before.t), t)
+    np.testing.assert_array_equal(np.asarray(ts.record.other_obs), np.asarray(before.other_obs))
+    np.testing.assert_array_equal(np.asarray(ts.obs[:-1]), np.asarray(before.obs[1:]))
+
+
+def test_jit_vmap_1024_and_same_key_same_trajectory(env: ControlledEnv) -> None:
+    rollout = make_random_rollout(env, num_envs=1024, num_steps=8)
+    _, a = rollout(jax.random.key(7))
+    _, b = rollout(jax.random.key(7))
+    _, c = rollout(jax.random.key(8))
+    assert a.obs.shape == (8, 1024, env.spec.obs_dim)
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    assert not np.array_equal(np.asarray(a.obs), np.asarray(c.obs))
+    assert np.all(np.isfinite(np.asarray(a.obs))) and np.all(np.isfinite(np.asarray(a.reward)))
+    # Partners are drawn from the whole population across copies.
+    assert len(np.unique(np.asarray(a.record.partner))) == env.num_partners
+
+
+def test_bad_inputs_raise_clear_errors(env: ControlledEnv) -> None:
+    n, m = env.spec.num_actions, env.num_partners
+    with pytest.raises(EnvError, match=rf"partner_id {m} out of range.*0\.\.{m - 1}"):
+        env.reset(jax.random.key(0), m)
+    state, _ = env.reset(jax.random.key(0), m - 1)
+    assert int(state.partner) == m - 1
+    with pytest.raises(EnvError, match=rf"action {n} out of range.*0={env.spec.action_names[0]}"):
+        env.step(jax.random.key(0), state, n)
+    with pytest.raises(EnvError, match="action -1 out of range"):
+        env.step(jax.random.key(0), state, -1)
+    with pytest.raises(EnvError, match=r"got shape \(3,\)"):
+        env.step(jax.random.key(0), state, jnp.zeros(3, jnp.int32))
