@@ -118,18 +118,9 @@ class Demo:
         from transam.envs.rollout import episode_stats, make_random_rollout
 
         _check_positive(episodes=self.episodes, num_envs=self.num_envs)
-        summary = Table(title="random controlled agent vs each partner population")
-        for col in (
-            "env",
-            "teams",
-            "episodes",
-            "mean return",
-            "std",
-            "worst team",
-            "best team",
-            "seconds",
-        ):
-            summary.add_column(col, justify="right")
+        summary = Table(title="random controlled agent: return (worst/best = team means)")
+        for col in ("env", "teams", "eps", "return", "std", "worst", "best", "secs"):
+            summary.add_column(col, justify="right", no_wrap=True)
         for name in self.envs:
             start = time.perf_counter()
             env = envs.make(name)
@@ -146,21 +137,26 @@ class Demo:
                 table.add_row(
                     team,
                     str(len(r)),
-                    f"{means[-1]:.3f}",
-                    f"{float(r.std()) if len(r) else float('nan'):.3f}",
+                    _num(means[-1]),
+                    _num(float(r.std()) if len(r) else float("nan")),
                 )
             console.print(table)
             summary.add_row(
                 name,
                 str(env.num_partners),
                 str(len(stats.returns)),
-                f"{stats.returns.mean():.3f}",
-                f"{stats.returns.std():.3f}",
-                f"{np.nanmin(means):.3f}",
-                f"{np.nanmax(means):.3f}",
+                _num(stats.returns.mean()),
+                _num(stats.returns.std()),
+                _num(np.nanmin(means)),
+                _num(np.nanmax(means)),
                 f"{time.perf_counter() - start:.1f}",
             )
         console.print(summary)
+
+
+def _num(x: float) -> str:
+    """Four significant digits: returns range from 0.01 (LBF) to hundreds (Tag, Overcooked)."""
+    return f"{x:.4g}"
 
 
 def _check_positive(**values: int) -> None:

@@ -56,7 +56,7 @@ import jax
 import jax.numpy as jnp
 
 from transam._quiet import quiet
-from transam.envs.core import ControlledEnv, GameSpec
+from transam.envs.core import ControlledEnv, EnvError, GameSpec
 from transam.partners.moves import MPE_ACTION_NAMES
 from transam.partners.population import Population
 from transam.partners.tag import heuristic_population
@@ -90,6 +90,10 @@ class Config:
     episode_len: int = 50  # steps per episode (LIAM: 50)
     boundary_penalty: bool = True  # charge the prey -10 per step outside |x|,|y| <= 0.99
     hard_walls: bool = False  # clamp agents inside the walls (the original walls leak)
+
+    def __post_init__(self) -> None:
+        if self.episode_len < 1:
+            raise EnvError(f"tag episode_len must be >= 1; got {self.episode_len!r}")
 
 
 class LiamTagMPE(SimpleTagMPE):
