@@ -172,3 +172,21 @@ def test_episode_stats_sums_each_finished_episode() -> None:
     stats = episode_stats(ts)
     np.testing.assert_allclose(sorted(stats.returns), [2.0, 2.0, 4.0])
     assert sorted(stats.partners.tolist()) == [0, 1, 2]
+
+
+def test_population_mixes_heuristic_and_neural_members() -> None:
+    """A learned member is a function closing over fixed parameters; it mixes with heuristics."""
+    import flax.linen as nn
+
+    net = nn.Dense(4)
+    params = net.init(jax.random.key(0), jnp.zeros(1))
+
+    def neural(key: jax.Array, obs: jax.Array) -> jax.Array:
+        return jnp.argmax(net.apply(params, obs)).astype(jnp.int32)
+
+    members = [*MEMBERS, Member("mlp", neural, kind="a2c")]
+    pop = Population("mixed", members, [Team("h", ("const1", "const0")), Team("n", ("mlp", "mlp"))])
+    env = ControlledEnv(CounterGame(), pop)
+    _, (before, ts) = _scan(env, np.ones(3, np.int32), partner=1)
+    expected = jax.vmap(jax.vmap(neural, (None, 0)), (None, 0))(jax.random.key(0), before.other_obs)
+    np.testing.assert_array_equal(np.asarray(ts.record.other_actions), np.asarray(expected))
