@@ -1,0 +1,94 @@
+"""The agent-model protocol every method (TransAM, its ablations, the baselines) implements.
+
+An agent model turns the controlled agent's own trajectory into an embedding z_t that the
+policy conditions on. It has three parts, and the types keep execution honest:
+
+* ``step`` (execution path): one step of *local* data (:class:`LocalStep`) and a carry (context
+  window, recurrent state) -> new carry and z_t. It never receives partner data: its input type
+  has no field for it. Only a model with ``privileged = True`` (the Oracle baseline) is handed
+  :class:`~transam.envs.core.EnvState`-derived partner data, through a separate argument.
+* ``embed_rollout`` (training path): the same z for a whole rollout of T steps, recomputed with
+  gradients from the carry at the rollout's start. It must equal ``step`` applied in sequence.
+* ``loss``: the auxiliary agent-modeling loss, which may use the training-only
+  :class:`~transam.envs.core.PartnerRecord` targets.
+
+All functions act on ONE environment (no batch axis); the trainer vmaps them.
+Episode boundaries: a step with ``first = True`` starts a new episode, and the model must not
+let anything from before it influence z (the carry is reset inside ``step`` itself, so no caller
+can forget to).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import jax
+from flax import struct
+
+from transam.envs.core import GameSpec, PartnerRecord
+
+Params = Any
+Carry = Any
+
+
+@struct.dataclass
+class LocalStep:
+    """What the controlled agent itself knows when it acts at step t (execution-time input)."""
+
+    obs: jax.Array  # o_t [obs_dim] float32
+    prev_action: jax.Array  # a_{t-1} int32 (0 and meaningless when ``first``)
+    prev_reward: jax.Array  # r_{t-1} float32 (0 when ``first``)
+    t: jax.Array  # int32 index of o_t within its episode
+    first: jax.Array  # bool: o_t is the first observation of an episode
+
+
+class AgentModel(Protocol):
+    """One agent-modeling method. Implementations are frozen dataclasses (hashable, static)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def privileged(self) -> bool:
+        """True only for the Oracle baseline."""
+        ...
+
+    @property
+    def embed_dim(self) -> int:
+        """Width of z."""
+        ...
+
+    def init(self, key: jax.Array, spec: GameSpec) -> Params:
+        """Fresh parameters (an empty dict for a model with none)."""
+        ...
+
+    def init_carry(self, spec: GameSpec) -> Carry:
+        """The carry before any step (a step with ``first=True`` resets it anyway)."""
+        ...
+
+    def step(self, params: Params, carry: Carry, x: LocalStep) -> tuple[Carry, jax.Array]:
+        """Execution path: (carry, z_t) from local data only."""
+        ...
+
+    def embed_rollout(self, params: Params, carry: Carry, xs: LocalStep) -> jax.Array:
+        """Training path: z [T, embed_dim] for the rollout ``xs`` (leading axis T), starting from
+        the carry the execution path had before ``xs[0]``; equals ``step`` applied in order."""
+        ...
+
+    def decode(self, params: Params, z: jax.Array) -> tuple[jax.Array, jax.Array] | None:
+        """The reconstruction head on one embedding: (predicted joint other-agent observation
+        [num_others * other_obs_dim], other agents' action logits [num_others, other_actions]),
+        or None for a model without one. Used for evaluation metrics at execution time."""
+        ...
+
+    def loss(
+        self,
+        params: Params,
+        carry: Carry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array,
+    ) -> tuple[jax.Array, dict[str, jax.Array]]:
+        """Auxiliary loss over the rollout and its metrics (e.g. ``action_accuracy``,
+        ``obs_mse``); ``targets`` line up with ``xs`` in time. Zero for models without one."""
+        ...

@@ -1,0 +1,391 @@
+"""TransAM: a transformer encoder over the controlled agent's own (r, a, o) token trajectory.
+
+* Tokens: per step t, r_{t-1} (scalar), a_{t-1} (one-hot) and o_t, each through its own linear
+  layer, plus a learned position-in-episode embedding of t added to all three; LayerNorm on the
+  tokens (as the authors' code). At an episode's first step there is no previous action or
+  reward: a zero one-hot and r = 0.
+* Window: the last K = ``context`` steps (3K tokens, r, a, o interleaved), left-padded; padding
+  and steps from before the current episode are masked out of attention (and zeroed).
+* Encoder: ``layers`` blocks (``nn.scan``), post-norm (BERT) or pre-norm, ReLU feed-forward,
+  dropout on attention weights and residual branches only when ``loss`` gets a key.
+  Bidirectional attention inside the window (``causal=True`` for a causal mask); since the window
+  ends at t, z_t = E^o at the newest observation token depends only on steps <= t.
+* Execution (``step``): the carry is a :class:`WindowCarry`, the raw local inputs of the last K
+  steps (not embeddings), so the training path can rebuild every window with gradients.
+* Training (``embed_rollout``, ``loss``): all T windows of a rollout built at once from the carry
+  and ``xs`` and encoded as one batch (no scan over time); equals ``step`` applied in order.
+* Reconstruction head (training only, ``params["head"]``; the encoder is ``params["encoder"]``):
+  one linear layer to the joint other-agent observation, one per other agent to its action
+  logits. The loss is MSE + mean over the other agents of a proper cross-entropy on logits (the
+  authors' code applies cross-entropy to softmax outputs, a double softmax; not copied). With
+  ``recon_at="all"`` every valid observation position of every window is reconstructed, except
+  positions holding steps from before the rollout (their targets are not in this rollout's
+  data; they were supervised in the previous rollout), so a step early in a rollout is
+  supervised in more windows than a late one.
+* Padding: the reference fills padded action slots with a constant; here padded entries are
+  masked and zeroed, so their content is irrelevant.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, Literal, cast
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from transam.envs.core import GameSpec, PartnerRecord
+from transam.models.base import LocalStep, Params
+
+
+@dataclass(frozen=True)
+class TransAMConfig:
+    """TransAM encoder and reconstruction-head settings (defaults: the reference settings)."""
+
+    context: int = 5
+    """K, the window in steps (3K tokens: reward, action, observation per step)"""
+    width: int = 128
+    """model (token) width"""
+    layers: int = 4
+    """transformer blocks"""
+    heads: int = 4
+    """attention heads"""
+    ff_width: int = 256
+    """inner (feed-forward) width"""
+    dropout: float = 0.1
+    """dropout on attention weights and residual branches (training path only)"""
+    norm: Literal["post", "pre"] = "post"
+    """post-norm (BERT, as the authors' code) or pre-norm blocks"""
+    causal: bool = False
+    """causal attention inside the window (the paper's encoder attends to the whole window)"""
+    recon_at: Literal["all", "last"] = "all"
+    """reconstruct at every valid observation position of each window (authors' code) or only
+    at the newest"""
+
+
+# --------------------------------------------------------------------------------------------
+# The model.
+#
+# Design (see the module docstring for the summary):
+# * The carry is a buffer of the last K steps' *raw* local inputs, not embeddings, so that the
+#   training path can rebuild every window from it and recompute z with gradients.
+# * One function, ``_Encoder``, maps windows [..., K] to observation-token outputs; ``step`` calls
+#   it on one window and ``embed_rollout`` / ``loss`` on all T windows of a rollout at once, so
+#   both paths run the same computation on the same inputs.
+# * Entries of a window that are invalid (padding, or from an earlier episode) are zeroed before
+#   embedding and hidden from every valid query by the attention mask, so they cannot influence z.
+
+
+@struct.dataclass
+class WindowCarry:
+    """The execution-path carry: the last K steps' local inputs, oldest first, newest last.
+
+    ``prev_action`` is -1 where the step had no previous action (an episode's first step), which
+    one-hot encodes to a zero vector; ``valid`` is False for padding.
+    """
+
+    obs: jax.Array  # [K, obs_dim] float32
+    prev_action: jax.Array  # [K] int32
+    prev_reward: jax.Array  # [K] float32
+    t: jax.Array  # [K] int32
+    valid: jax.Array  # [K] bool
+
+
+_LOCAL_FIELDS = ("obs", "prev_action", "prev_reward", "t", "first")
+
+
+def _check_local(x: Any, spec: GameSpec, rollout: bool) -> None:
+    """Refuse anything but a :class:`LocalStep` of the right shape (partner data included)."""
+    if type(x) is not LocalStep:
+        raise TypeError(
+            f"TransAM's execution/training paths take a LocalStep (fields {_LOCAL_FIELDS}); got "
+            f"{type(x).__name__}. Partner data (PartnerRecord) goes to `loss` as targets only."
+        )
+    want = (spec.obs_dim,)
+    have = tuple(x.obs.shape[1:] if rollout else x.obs.shape)
+    if have != want:
+        where = "xs.obs [T, obs_dim]" if rollout else "x.obs [obs_dim] (one env; vmap for a batch)"
+        raise ValueError(f"TransAM expects {where} with obs_dim {spec.obs_dim}; got {x.obs.shape}")
+
+
+def _entry(x: LocalStep) -> WindowCarry:
+    """One (or T) LocalStep(s) as buffer entries: no previous action/reward at an episode start."""
+    return WindowCarry(
+        obs=jnp.asarray(x.obs, jnp.float32),
+        prev_action=jnp.where(x.first, -1, jnp.asarray(x.prev_action, jnp.int32)),
+        prev_reward=jnp.where(x.first, 0.0, jnp.asarray(x.prev_reward, jnp.float32)),
+        t=jnp.asarray(x.t, jnp.int32),
+        valid=jnp.ones_like(x.first, dtype=bool),
+    )
+
+
+class _Block(nn.Module):
+    """One transformer encoder block (post-norm as BERT, or pre-norm), for ``nn.scan``."""
+
+    config: TransAMConfig
+    deterministic: bool
+
+    @nn.compact
+    def __call__(self, x: jax.Array, mask: jax.Array) -> tuple[jax.Array, None]:
+        cfg = self.config
+        attn = nn.MultiHeadDotProductAttention(
+            num_heads=cfg.heads,
+            qkv_features=cfg.width,
+            out_features=cfg.width,
+            dropout_rate=cfg.dropout,
+            broadcast_dropout=False,  # independent masks per window
+            deterministic=self.deterministic,
+            name="attn",
+        )
+        drop = nn.Dropout(cfg.dropout, deterministic=self.deterministic)
+
+        def feed_forward(h: jax.Array) -> jax.Array:
+            h = nn.relu(nn.Dense(cfg.ff_width, name="ff_in")(h))
+            return nn.Dense(cfg.width, name="ff_out")(h)
+
+        if cfg.norm == "post":
+            x = nn.LayerNorm(name="ln_attn")(x + drop(attn(x, mask=mask)))
+            x = nn.LayerNorm(name="ln_ff")(x + drop(feed_forward(x)))
+        else:
+            x = x + drop(attn(nn.LayerNorm(name="ln_attn")(x), mask=mask))
+            x = x + drop(feed_forward(nn.LayerNorm(name="ln_ff")(x)))
+        return x, None
+
+
+class _Encoder(nn.Module):
+    """Windows [..., K] of raw local inputs -> observation-token outputs E^o [..., K, width]."""
+
+    config: TransAMConfig
+    num_actions: int
+    episode_len: int
+    deterministic: bool
+
+    @nn.compact
+    def __call__(self, w: WindowCarry) -> jax.Array:
+        cfg = self.config
+        k = w.valid.shape[-1]
+        batch = w.valid.shape[:-1]
+        valid = w.valid
+        # Invalid entries are zeroed so that even their (masked) tokens carry nothing stale.
+        obs = jnp.where(valid[..., None], w.obs, 0.0)
+        reward = jnp.where(valid, w.prev_reward, 0.0)[..., None]
+        action = jax.nn.one_hot(jnp.where(valid, w.prev_action, -1), self.num_actions)
+        # Clipped: jnp.take would read NaN past the table (an episode longer than episode_len).
+        t = jnp.clip(jnp.where(valid, w.t, 0), 0, self.episode_len - 1)
+        pos = nn.Embed(self.episode_len, cfg.width, name="embed_t")(t)
+        tokens = (
+            jnp.stack(
+                [
+                    nn.Dense(cfg.width, name="embed_r")(reward),
+                    nn.Dense(cfg.width, name="embed_a")(action),
+                    nn.Dense(cfg.width, name="embed_o")(obs),
+                ],
+                axis=-2,
+            )
+            + pos[..., None, :]
+        )  # [..., K, 3, width]: (r_{t-1}, a_{t-1}, o_t) per step
+        x = nn.LayerNorm(name="embed_ln")(tokens.reshape(*batch, 3 * k, cfg.width))
+
+        tok_valid = jnp.repeat(valid, 3, axis=-1)  # [..., 3K]
+        mask = tok_valid[..., :, None] & tok_valid[..., None, :]  # [..., query, key]
+        if cfg.causal:
+            mask = mask & jnp.tril(jnp.ones((3 * k, 3 * k), bool))
+        # Padding queries attend to themselves only: no fully masked row; valid queries are
+        # unaffected (their own key is valid anyway).
+        mask = mask | jnp.eye(3 * k, dtype=bool)
+        blocks = nn.scan(
+            _Block,
+            variable_axes={"params": 0},
+            split_rngs={"params": True, "dropout": True},
+            in_axes=nn.broadcast,
+            length=cfg.layers,
+        )(cfg, self.deterministic, name="blocks")
+        x, _ = blocks(x, mask[..., None, :, :])  # heads axis broadcast
+        if cfg.norm == "pre":
+            x = nn.LayerNorm(name="ln_final")(x)
+        return x.reshape(*batch, k, 3, cfg.width)[..., 2, :]
+
+
+class _Head(nn.Module):
+    """Reconstruction head: z -> (joint other-agent obs, per-agent action logits)."""
+
+    num_others: int
+    other_obs_dim: int
+    other_num_actions: int
+
+    @nn.compact
+    def __call__(self, z: jax.Array) -> tuple[jax.Array, jax.Array]:
+        obs = nn.Dense(self.num_others * self.other_obs_dim, name="obs")(z)
+        # A kernel [width, N, A]: N independent linear layers, one per other agent.
+        logits = nn.DenseGeneral((self.num_others, self.other_num_actions), name="actions")(z)
+        return obs, logits
+
+
+@partial(jax.jit, static_argnums=0)
+def _init_params(model: TransAM, key: jax.Array) -> Params:
+    """Jitted (one program, not hundreds of eager ops) and without the forward pass."""
+    key_enc, key_head = jax.random.split(key)
+    window = jax.eval_shape(lambda: model.init_carry(model.spec))
+    enc = model._encoder(True).lazy_init(key_enc, window)["params"]
+    z = jax.ShapeDtypeStruct((model.config.width,), jnp.float32)
+    head = model._head().lazy_init(key_head, z)["params"]
+    return {"encoder": enc, "head": head}
+
+
+@dataclass(frozen=True)
+class TransAM:
+    """TransAM as an :class:`~transam.models.base.AgentModel` (one environment, no batch axis).
+
+    Parameters: ``{"encoder": ..., "head": ...}``; the head is used only by ``loss``/``decode``.
+    """
+
+    spec: GameSpec
+    config: TransAMConfig = TransAMConfig()
+    name = "transam"  # class attributes, not fields: fixed for the method
+    privileged = False
+
+    def __post_init__(self) -> None:
+        cfg = self.config
+        if cfg.context < 1 or cfg.layers < 1 or cfg.heads < 1 or cfg.ff_width < 1:
+            raise ValueError(f"TransAM context, layers, heads, ff_width must be >= 1; got {cfg}")
+        if cfg.width % cfg.heads:
+            raise ValueError(f"TransAM width {cfg.width} must be divisible by heads {cfg.heads}")
+        if not 0.0 <= cfg.dropout < 1.0:
+            raise ValueError(f"TransAM dropout must be in [0, 1); got {cfg.dropout}")
+        if cfg.norm not in ("post", "pre") or cfg.recon_at not in ("all", "last"):
+            raise ValueError(f"TransAM norm/recon_at invalid: {cfg.norm!r}, {cfg.recon_at!r}")
+
+    @property
+    def embed_dim(self) -> int:
+        return self.config.width
+
+    # -- modules ---------------------------------------------------------------------------------
+
+    def _encoder(self, deterministic: bool) -> _Encoder:
+        return _Encoder(self.config, self.spec.num_actions, self.spec.episode_len, deterministic)
+
+    def _head(self) -> _Head:
+        s = self.spec
+        return _Head(s.num_others, s.other_obs_dim, s.other_num_actions)
+
+    def _encode(self, params: Params, w: WindowCarry, key: jax.Array | None = None) -> jax.Array:
+        """E^o [..., K, width] of windows ``w``; dropout only when ``key`` is given."""
+        variables = {"params": params["encoder"]}
+        if key is None or self.config.dropout == 0.0:
+            out = self._encoder(True).apply(variables, w)
+        else:
+            out = self._encoder(False).apply(variables, w, rngs={"dropout": key})
+        return cast(jax.Array, out)
+
+    # -- protocol --------------------------------------------------------------------------------
+
+    def init(self, key: jax.Array, spec: GameSpec) -> Params:
+        if spec != self.spec:
+            raise ValueError(f"TransAM built for {self.spec.name!r}, init called for {spec.name!r}")
+        # Settings that do not change the parameters are normalised so that models differing
+        # only in them share one compiled init.
+        shape_cfg = dataclasses.replace(
+            self.config, context=1, dropout=0.0, causal=False, recon_at="all"
+        )
+        return _init_params(TransAM(self.spec, shape_cfg), key)
+
+    def init_carry(self, spec: GameSpec) -> WindowCarry:
+        k = self.config.context
+        return WindowCarry(
+            obs=jnp.zeros((k, spec.obs_dim), jnp.float32),
+            prev_action=jnp.full((k,), -1, jnp.int32),
+            prev_reward=jnp.zeros((k,), jnp.float32),
+            t=jnp.zeros((k,), jnp.int32),
+            valid=jnp.zeros((k,), bool),
+        )
+
+    def push(self, carry: WindowCarry, x: LocalStep) -> WindowCarry:
+        """The carry after ``x``: emptied when ``x.first``, then ``x`` shifted in as newest.
+
+        Parameter-free, so a trainer can precompute carries without running the encoder.
+        """
+        _check_local(x, self.spec, rollout=False)
+        empty = self.init_carry(self.spec)
+        carry = jax.tree.map(lambda e, c: jnp.where(x.first, e, c), empty, carry)
+        new = _entry(x)
+        return jax.tree.map(lambda c, n: jnp.concatenate([c[1:], n[None]], axis=0), carry, new)
+
+    def step(
+        self, params: Params, carry: WindowCarry, x: LocalStep
+    ) -> tuple[WindowCarry, jax.Array]:
+        carry = self.push(carry, x)
+        z = self._encode(params, carry)[-1]
+        return carry, z
+
+    def _windows(self, carry: WindowCarry, xs: LocalStep) -> WindowCarry:
+        """All T windows of a rollout [T, K]: window i ends at ``xs[i]``, and entries from an
+        earlier episode than its newest step are marked invalid (via the ``first`` flags)."""
+        _check_local(xs, self.spec, rollout=True)
+        k = self.config.context
+        num_steps = xs.obs.shape[0]
+        seq = jax.tree.map(
+            lambda c, n: jnp.concatenate([c[1:], n], axis=0), carry, _entry(xs)
+        )  # [K-1+T]
+        # Episode id along the sequence: the carry's valid entries all belong to one episode
+        # (``push`` empties it at a boundary); each ``first`` in xs starts a new one.
+        starts = jnp.concatenate([jnp.zeros((k - 1,), jnp.int32), xs.first.astype(jnp.int32)])
+        episode = jnp.cumsum(starts)
+        idx = jnp.arange(num_steps)[:, None] + jnp.arange(k)[None, :]  # [T, K]
+        win = jax.tree.map(lambda a: a[idx], seq)
+        same = episode[idx] == episode[idx[:, -1:]]
+        return win.replace(valid=win.valid & same)
+
+    def embed_rollout(self, params: Params, carry: WindowCarry, xs: LocalStep) -> jax.Array:
+        return self._encode(params, self._windows(carry, xs))[:, -1]
+
+    def decode(self, params: Params, z: jax.Array) -> tuple[jax.Array, jax.Array]:
+        out = self._head().apply({"params": params["head"]}, z)
+        return cast(tuple[jax.Array, jax.Array], out)
+
+    def loss(
+        self,
+        params: Params,
+        carry: WindowCarry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array]]:
+        """Reconstruction loss over the rollout's windows (dropout only when ``key`` is given).
+
+        Window i ends at rollout step i; its observation position k holds rollout step
+        j = i + k - (K-1), reconstructed from E^o at that position (``recon_at="all"``: every
+        valid position with j >= 0; positions from before the rollout have no targets here and
+        are masked; ``"last"``: only k = K-1). Each position weighs the same. Per position:
+        MSE (mean over the joint observation's elements) + mean over the other agents of the
+        cross-entropy of their action logits. Metrics use the newest positions only (what
+        execution uses).
+        """
+        k = self.config.context
+        num_steps = xs.obs.shape[0]
+        win = self._windows(carry, xs)
+        emb = self._encode(params, win, key)  # [T, K, width]
+        pred_obs, logits = self.decode(params, emb)  # [T, K, N*D], [T, K, N, A]
+        j = jnp.arange(num_steps)[:, None] + jnp.arange(k)[None, :] - (k - 1)
+        jc = jnp.clip(j, 0, num_steps - 1)
+        tgt_obs = targets.other_obs.reshape(num_steps, -1).astype(jnp.float32)[jc]
+        tgt_act = targets.other_actions.astype(jnp.int32)[jc]  # [T, K, N]
+        mse = jnp.mean((pred_obs - tgt_obs) ** 2, axis=-1)  # [T, K]
+        ce_each = optax.softmax_cross_entropy_with_integer_labels(logits, tgt_act)  # [T, K, N]
+        ce = jnp.mean(ce_each, axis=-1)
+        if self.config.recon_at == "all":
+            weight = (win.valid & (j >= 0)).astype(jnp.float32)
+        else:
+            weight = jnp.zeros((num_steps, k)).at[:, -1].set(1.0)
+        total = jnp.sum((mse + ce) * weight) / jnp.maximum(jnp.sum(weight), 1.0)
+        correct = jnp.argmax(logits[:, -1], axis=-1) == tgt_act[:, -1]
+        metrics = {
+            "obs_mse": jnp.mean(mse[:, -1]),
+            "action_ce": jnp.mean(ce[:, -1]),
+            "action_accuracy": jnp.mean(correct.astype(jnp.float32)),
+        }
+        return total, metrics
