@@ -57,6 +57,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from transam.envs.core import ControlledEnv, EnvError, GameSpec
+from transam.partners.joint import JointView
 from transam.partners.population import Population
 
 NUM_AGENTS = 2
@@ -307,6 +308,34 @@ class LBFGame:
         joint = jnp.concatenate([others[:CONTROLLED], mine, others[CONTROLLED:]])
         next_state, rewards, terminal = step_state(state, joint, self.config)
         return next_state, rewards[CONTROLLED], terminal
+
+
+def joint_view(config: Config) -> JointView:
+    """Both agents as learners (self-play): agent 0 stands in for the controlled agent, and
+    each agent is trained on, and scored by, its own share of the collected food."""
+
+    def observe(state: State) -> jax.Array:
+        return jnp.stack([observe_agent(state, i, config) for i in range(NUM_AGENTS)])
+
+    def step(
+        key: jax.Array, state: State, actions: jax.Array, weights: jax.Array
+    ) -> tuple[State, jax.Array, jax.Array, jax.Array]:
+        del key, weights
+        nxt, rewards, terminal = step_state(state, actions, config)
+        return nxt, rewards, rewards, terminal
+
+    return JointView(
+        name="lbf",
+        num_agents=NUM_AGENTS,
+        obs_dim=config.obs_dim,
+        num_actions=len(ACTION_NAMES),
+        episode_len=config.episode_len,
+        reset=lambda key: spawn(key, config),
+        observe=observe,
+        step=step,
+        partner_slots=tuple(i for i in range(NUM_AGENTS) if i != CONTROLLED),
+        controlled=CONTROLLED,
+    )
 
 
 def make_env(config: Config, population: Population | None = None) -> ControlledEnv:

@@ -56,6 +56,8 @@ with quiet():
     from jaxmarl.environments.overcooked.common import OBJECT_TO_INDEX
     from jaxmarl.environments.overcooked.overcooked import State
 
+from transam.partners.joint import JointView
+
 if TYPE_CHECKING:
     from transam.partners.population import Population
 
@@ -239,6 +241,35 @@ class OvercookedGame:
             key, state, self.joint_actions(action, other_actions)
         )
         return next_state, sparse[self.slot], jnp.zeros((), jnp.bool_)
+
+    def joint_view(self) -> JointView:
+        """Both cooks as learners (self-play): the controlled slot's cook is the stand-in.
+
+        Learner i is JaxMARL ``agent_i``. Its training reward is the sparse team reward plus
+        its own shaped events weighted by row i of the recipe's ``weights`` (onion into pot,
+        useful plate pickup, soup pickup); the score is the sparse reward alone.
+        """
+
+        def step(
+            key: jax.Array, state: State, actions: jax.Array, weights: jax.Array
+        ) -> tuple[State, jax.Array, jax.Array, jax.Array]:
+            nxt, sparse, _ = self.joint_step(key, state, actions)
+            events = shaped_events(state, actions, nxt).astype(jnp.float32)
+            shaped = jnp.sum(events * weights, axis=-1)
+            return nxt, sparse + shaped, sparse, jnp.zeros((), jnp.bool_)
+
+        return JointView(
+            name="overcooked",
+            num_agents=2,
+            obs_dim=OBS_DIM,
+            num_actions=len(ACTION_NAMES),
+            episode_len=self.config.episode_len,
+            reset=self.reset,
+            observe=self.joint_observe,
+            step=step,
+            partner_slots=(1 - self.slot,),
+            controlled=self.slot,
+        )
 
 
 def _face_north(state: State) -> State:

@@ -41,6 +41,7 @@ import jax.numpy as jnp
 
 from transam._quiet import quiet
 from transam.envs.core import ControlledEnv, EnvError, GameSpec
+from transam.partners.joint import JointView
 from transam.partners.moves import MPE_ACTION_NAMES
 from transam.partners.population import Population
 
@@ -128,20 +129,54 @@ class SpreadGame:
             return jnp.asarray(r, jnp.float32)
         return self.mpe_reward(state)
 
-    def mpe_reward(self, state: State) -> jax.Array:
-        """Original MPE cooperative-navigation reward of the controlled agent (module doc)."""
+    def mpe_reward(self, state: State, agent: int = CONTROLLED) -> jax.Array:
+        """Original MPE cooperative-navigation reward of ``agent`` (module doc)."""
         agents = state.p_pos[:NUM_AGENTS]
         landmarks = state.p_pos[NUM_AGENTS:]
         dists = jnp.linalg.norm(agents[None, :, :] - landmarks[:, None, :], axis=-1)  # [L, A]
         cover = -jnp.sum(jnp.min(dists, axis=1))
         radius = self.mpe.rad[:NUM_AGENTS]
-        touching = jnp.linalg.norm(agents - agents[CONTROLLED], axis=-1) < (
-            radius + radius[CONTROLLED]
-        )
-        counted = jnp.arange(NUM_AGENTS) != CONTROLLED
+        touching = jnp.linalg.norm(agents - agents[agent], axis=-1) < (radius + radius[agent])
+        counted = jnp.arange(NUM_AGENTS) != agent
         if self.config.self_collision:
             counted = jnp.ones(NUM_AGENTS, bool)
         return (cover - jnp.sum(touching & counted)).astype(jnp.float32)
+
+    def agent_rewards(self, state: State) -> jax.Array:
+        """[3] every agent's own reward under ``config.reward`` (for training partners)."""
+        if self.config.reward == "pettingzoo":
+            r = self.mpe.rewards(state)
+            return jnp.stack([r[a] for a in self.mpe.agents]).astype(jnp.float32)
+        return jnp.stack([self.mpe_reward(state, i) for i in range(NUM_AGENTS)])
+
+    def joint_view(self) -> JointView:
+        """All three agents as learners (self-play); agent 2 stands in for the controlled one."""
+
+        def observe(state: State) -> jax.Array:
+            obs = self.mpe.get_obs(state)
+            return jnp.stack([obs[a] for a in self.mpe.agents]).astype(jnp.float32)
+
+        def step(
+            key: jax.Array, state: State, actions: jax.Array, weights: jax.Array
+        ) -> tuple[State, jax.Array, jax.Array, jax.Array]:
+            del weights
+            acts = {a: actions[i] for i, a in enumerate(self.mpe.agents)}
+            _, nxt, _, _, _ = self.mpe.step_env(key, state, acts)
+            r = self.agent_rewards(nxt)
+            return nxt, r, r, jnp.zeros((), bool)
+
+        return JointView(
+            name="spread",
+            num_agents=NUM_AGENTS,
+            obs_dim=OBS_DIM,
+            num_actions=5,
+            episode_len=self.config.episode_len,
+            reset=self.reset,
+            observe=observe,
+            step=step,
+            partner_slots=tuple(i for i in range(NUM_AGENTS) if i != CONTROLLED),
+            controlled=CONTROLLED,
+        )
 
 
 def make_env(config: Config, population: Population | None = None) -> ControlledEnv:

@@ -57,8 +57,9 @@ import jax.numpy as jnp
 
 from transam._quiet import quiet
 from transam.envs.core import ControlledEnv, EnvError, GameSpec
+from transam.partners.joint import JointView
 from transam.partners.moves import MPE_ACTION_NAMES
-from transam.partners.population import Population
+from transam.partners.population import PolicyFn, Population
 from transam.partners.tag import heuristic_population
 
 with quiet():
@@ -267,6 +268,55 @@ class TagGame:
         if self.config.boundary_penalty:
             return capture_reward(state) + boundary_penalty(state)
         return capture_reward(state)
+
+
+def predator_capture_reward(state: State) -> jax.Array:
+    """LIAM's predator team reward without shaping: c = 1 pair within 0.28 gives -1, c >= 2 +1."""
+    c = num_captures(state)
+    return jnp.where(c == 1, -1.0, jnp.where(c >= 2, 1.0, 0.0)).astype(jnp.float32)
+
+
+def predator_reward(state: State) -> jax.Array:
+    """LIAM's shared predator reward: the capture term minus 0.1 * summed distance to the prey."""
+    d = jnp.linalg.norm(state.p_pos[:NUM_PREDATORS] - state.p_pos[PREY], axis=-1)
+    return predator_capture_reward(state) - 0.1 * jnp.sum(d)
+
+
+def joint_view(config: Config, prey: PolicyFn) -> JointView:
+    """The three predators as learners; ``prey`` (a stand-in) plays the controlled agent.
+
+    Every predator gets LIAM's shared predator reward (with the distance shaping) to train on
+    and is scored by it too: the capture term alone (-1 for a lone catch, +1 for a joint one)
+    is too sparse to separate short-trained predators from random ones.
+    """
+    game = TagGame(config)
+
+    def observe(state: State) -> jax.Array:
+        return game.observe(state)[1]
+
+    def step(
+        key: jax.Array, state: State, actions: jax.Array, weights: jax.Array
+    ) -> tuple[State, jax.Array, jax.Array, jax.Array]:
+        del weights
+        k_prey, k_step = jax.random.split(key)
+        prey_action = jnp.asarray(prey(k_prey, game.observe(state)[0]), jnp.int32)
+        nxt, _, term = game.transition(k_step, state, prey_action, actions)
+        ones = jnp.ones(NUM_PREDATORS, jnp.float32)
+        r = ones * predator_reward(nxt)
+        return nxt, r, r, term
+
+    return JointView(
+        name="tag",
+        num_agents=NUM_PREDATORS,
+        obs_dim=16,
+        num_actions=5,
+        episode_len=config.episode_len,
+        reset=game.reset,
+        observe=observe,
+        step=step,
+        partner_slots=(0, 1, 2),
+        controlled=None,
+    )
 
 
 def make_env(config: Config, population: Population | None = None) -> ControlledEnv:

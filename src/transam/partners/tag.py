@@ -74,6 +74,23 @@ def after_pred(key: jax.Array, obs: jax.Array) -> jax.Array:
     return move_toward(jnp.where(pick_b, obs[PRED_B], obs[PRED_A]))
 
 
+def flee_prey(key: jax.Array, obs: jax.Array) -> jax.Array:
+    """Prey stand-in for training predators: away from the nearest visible predator, else
+    toward the centre (it reads the prey's 14-dim masked observation)."""
+    del key
+    preds = obs[8:14].reshape(3, 2)
+    seen = jnp.all(preds > -4.0, axis=-1)
+    d2 = jnp.where(seen, jnp.sum(jnp.square(preds), axis=-1), jnp.inf)
+    nearest = preds[jnp.argmin(d2)]
+    return move_toward(jnp.where(jnp.any(seen), -nearest, -obs[2:4]))
+
+
+def random_prey(key: jax.Array, obs: jax.Array) -> jax.Array:
+    """Uniformly random prey (stand-in for training predators)."""
+    del obs
+    return jax.random.randint(key, (), 0, 5, dtype=jnp.int32)
+
+
 HEURISTICS: tuple[Member, ...] = (
     Member("after_prey", after_prey),
     Member("after_agent_far", after_agent_far),

@@ -1,0 +1,268 @@
+"""Train, ship and load the learned partner populations (weights + manifest per environment).
+
+Layout: ``transam/partners/data/<env>/manifest.json`` holds, per split (``default`` and
+``heldout``), the member table (name, kind, recipe, seed, shaping, gamma, steps, agent,
+checkpoint, self-play return) and the teams; ``<split>.safetensors`` holds each member's actor
+as ``<member>/<param path>`` tensors. Loading reads these files only: no network, no training.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax.traverse_util import flatten_dict, unflatten_dict
+from safetensors.numpy import load_file, save_file
+
+from transam.partners.joint import JointView, play
+from transam.partners.population import Member, PolicyFn, Population, Team
+from transam.partners.recipes import Recipe
+from transam.partners.train import make_policy, train_many
+
+SPLITS = ("default", "heldout")
+EVAL_EPISODES = 32
+
+
+def data_dir(env: str) -> Path:
+    """The package folder holding ``env``'s shipped population."""
+    return Path(str(resources.files("transam.partners"))) / "data" / env
+
+
+def joint_view(env: str, stand_in: str = "self-play") -> JointView:
+    """The training view of ``env`` with its default config (Tag: the named prey stand-in)."""
+    if env == "tag":
+        from transam.envs import tag
+        from transam.partners.tag import flee_prey, random_prey
+
+        return tag.joint_view(tag.Config(), flee_prey if stand_in == "flee" else random_prey)
+    if env == "spread":
+        from transam.envs import spread
+
+        return spread.SpreadGame(spread.Config()).joint_view()
+    if env == "overcooked":
+        from transam.envs import overcooked
+
+        return overcooked.OvercookedGame(overcooked.Config()).joint_view()
+    if env == "lbf":
+        from transam.envs import lbf
+
+        return lbf.joint_view(lbf.Config())
+    raise ValueError(f"unknown environment {env!r}")
+
+
+def random_policy(num_actions: int) -> PolicyFn:
+    def act(key: jax.Array, obs: jax.Array) -> jax.Array:
+        del obs
+        return jax.random.randint(key, (), 0, num_actions, dtype=jnp.int32)
+
+    return act
+
+
+def evaluate(
+    view: JointView, policies: list[PolicyFn], seed: int = 0, weights: Any = None
+) -> np.ndarray:
+    """Mean episode score per learner over EVAL_EPISODES episodes (jitted)."""
+    fn = jax.jit(lambda k: play(view, policies, k, EVAL_EPISODES, weights)[0])
+    return np.asarray(fn(jax.random.PRNGKey(seed)))
+
+
+def train_recipe(recipe: Recipe, log: Any = print) -> tuple[dict[str, np.ndarray], dict]:
+    """Train every run of ``recipe`` (one vmapped program per family) and score the results.
+
+    Returns (safetensors dict, manifest split entry). Deterministic for a given recipe.
+    """
+    tensors: dict[str, np.ndarray] = {}
+    members: list[dict[str, Any]] = []
+    random_returns: dict[str, list[float]] = {}
+    for fam in recipe.families:
+        runs = [r for r in recipe.runs if r.family == fam.name]
+        if not runs:
+            continue
+        view = joint_view(recipe.env, fam.stand_in)
+        weights = [
+            np.asarray(r.shaping if r.shaping else np.zeros((view.num_agents, 3)), np.float32)
+            for r in runs
+        ]
+        t0 = time.time()
+        params, _ = train_many(
+            view, fam.ppo, [r.seed for r in runs], [r.gamma for r in runs], weights
+        )
+        secs = time.time() - t0
+        log(f"{recipe.env}/{recipe.split} {fam.name}: {len(runs)} run(s) in {secs:.1f}s")
+        rnd = evaluate(view, [random_policy(view.num_actions)] * view.num_agents)
+        random_returns[fam.stand_in] = [round(float(x), 4) for x in rnd]
+        for i, run in enumerate(runs):
+            run_p = jax.tree.map(lambda x, i=i: x[i], params)  # [K, A, ...]
+            scores: dict[int, list[float]] = {}
+            for name, ck, agent in run.members:
+                if ck not in scores:
+                    pol = [
+                        make_policy(
+                            jax.tree.map(lambda x, c=ck, a=a: x[c, a], run_p),
+                            recipe.env,
+                            view.num_actions,
+                            fam.ppo.hidden,
+                        )
+                        for a in range(view.num_agents)
+                    ]
+                    scores[ck] = [round(float(x), 4) for x in evaluate(view, pol)]
+                p = jax.tree.map(lambda x, c=ck, a=agent: np.asarray(x[c, a]), run_p)
+                for path, arr in flatten_dict(p, sep="/").items():
+                    tensors[f"{name}/{path}"] = np.ascontiguousarray(arr, np.float32)
+                steps = fam.ppo.num_updates * fam.ppo.num_envs * fam.ppo.rollout_len
+                members.append(
+                    {
+                        "name": name,
+                        "kind": fam.ppo.algorithm,
+                        "recipe": fam.name,
+                        "stand_in": fam.stand_in,
+                        "seed": run.seed,
+                        "shaping": run.shaping_label,
+                        "shaping_weights": [list(w) for w in run.shaping] if run.shaping else None,
+                        "gamma": run.gamma,
+                        "steps": steps * (ck + 1) // fam.ppo.checkpoints,
+                        "agent": agent,
+                        "checkpoint": ck,
+                        "hidden": fam.ppo.hidden,
+                        "self_play_return": scores[ck][agent],
+                        "self_play_returns_all": scores[ck],
+                        "train_seconds": round(secs / len(runs), 1),
+                    }
+                )
+    entry = {
+        "members": members,
+        "teams": [{"name": n, "slots": list(s)} for n, s in recipe.teams],
+        "random_return": random_returns,
+        "eval_episodes": EVAL_EPISODES,
+    }
+    return tensors, entry
+
+
+def rescore(env: str, split: str = "default", root: Path | None = None) -> dict:
+    """Recompute the manifest's self-play and random returns from the shipped weights.
+
+    Only for games whose every learner of a run is shipped (Tag, LBF); the others need the
+    unshipped self-play stand-in and keep their training-time numbers.
+    """
+    manifest = load_manifest(env, root)
+    entry = manifest[split]
+    members = learned_members(env, split, root)
+    runs: dict[tuple, dict[int, str]] = {}
+    for m in entry["members"]:
+        runs.setdefault((m["recipe"], m["seed"], m["checkpoint"]), {})[m["agent"]] = m["name"]
+    done: set[str] = set()
+    for m in entry["members"]:
+        view = joint_view(env, m["stand_in"])
+        team = runs[(m["recipe"], m["seed"], m["checkpoint"])]
+        if len(team) < view.num_agents:
+            raise ValueError(f"{env}: run of {m['name']} is not fully shipped; cannot rescore")
+        pols = [members[team[a]].act for a in range(view.num_agents)]
+        m["self_play_return"] = round(float(evaluate(view, pols)[m["agent"]]), 4)
+        if m["stand_in"] not in done:
+            rnd = evaluate(view, [random_policy(view.num_actions)] * view.num_agents)
+            entry["random_return"][m["stand_in"]] = [round(float(x), 4) for x in rnd]
+            done.add(m["stand_in"])
+    (root or data_dir(env)).joinpath("manifest.json").write_text(
+        json.dumps(manifest, indent=1, sort_keys=True) + "\n"
+    )
+    return entry
+
+
+def save(
+    env: str, split: str, tensors: dict[str, np.ndarray], entry: dict, root: Path | None = None
+) -> Path:
+    """Write ``split``'s weights and its manifest entry (other splits kept)."""
+    d = root or data_dir(env)
+    d.mkdir(parents=True, exist_ok=True)
+    # Temp file then rename, so an interrupted save never leaves half-written shipped data.
+    weights = d / f"{split}.safetensors"
+    save_file(tensors, str(weights.with_suffix(".tmp")))
+    weights.with_suffix(".tmp").chmod(0o644)  # safetensors writes 0600; ship readable
+    weights.with_suffix(".tmp").replace(weights)
+    path = d / "manifest.json"
+    manifest = json.loads(path.read_text()) if path.exists() else {"env": env}
+    manifest[split] = entry
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
+    tmp.replace(path)
+    return path
+
+
+def load_manifest(env: str, root: Path | None = None) -> dict:
+    path = (root or data_dir(env)) / "manifest.json"
+    if not path.exists():
+        raise FileNotFoundError(
+            f"no shipped partners for {env!r} at {path}; run `transam partners train {env}`"
+        )
+    return json.loads(path.read_text())
+
+
+def load_params(env: str, split: str = "default", root: Path | None = None) -> dict[str, Any]:
+    """Member name -> actor params (nested dict of numpy arrays)."""
+    flat = load_file(str((root or data_dir(env)) / f"{split}.safetensors"))
+    by_member: dict[str, dict[str, np.ndarray]] = {}
+    for key, arr in flat.items():
+        name, path = key.split("/", 1)
+        by_member.setdefault(name, {})[path] = arr
+    return {n: unflatten_dict(p, sep="/") for n, p in by_member.items()}
+
+
+def learned_members(
+    env: str, split: str = "default", root: Path | None = None
+) -> dict[str, Member]:
+    """The shipped learned members of ``env`` as population members (sampling actors)."""
+    view_actions = {"tag": 5, "spread": 5, "overcooked": 6, "lbf": 6}[env]
+    entry = load_manifest(env, root)[split]
+    params = load_params(env, split, root)
+    return {
+        m["name"]: Member(
+            m["name"],
+            make_policy(params[m["name"]], env, view_actions, m["hidden"]),
+            kind=f"{m['kind']}:{m['recipe']}",
+        )
+        for m in entry["members"]
+    }
+
+
+def heuristic_pool(env: str) -> dict[str, Member]:
+    """The environment's heuristic members, by name."""
+    if env == "tag":
+        from transam.partners.tag import HEURISTICS
+
+        return {m.name: m for m in HEURISTICS}
+    if env == "spread":
+        from transam.partners.spread import heuristic_members
+
+        return {m.name: m for m in heuristic_members()}
+    if env == "overcooked":
+        from transam.partners.overcooked import heuristic_members as oc
+
+        return {m.name: m for m in oc()}
+    from transam.envs.lbf import Config
+    from transam.partners.lbf import heuristic_members as lb
+
+    return {m.name: m for m in lb(Config())}
+
+
+def population(env: str, split: str = "default", root: Path | None = None) -> Population:
+    """``env``'s shipped population: learned members plus the heuristics its teams name.
+
+    Tag uses LIAM's 10-team table with the six learned predators in its learned slots.
+    """
+    learned = learned_members(env, split, root)
+    name = f"{env}-{split}"
+    if env == "tag":
+        from transam.partners.tag import liam_population
+
+        return liam_population(learned, name=name)
+    entry = load_manifest(env, root)[split]
+    pool = {**heuristic_pool(env), **learned}
+    teams = [Team(t["name"], tuple(t["slots"])) for t in entry["teams"]]
+    used = sorted({s for t in teams for s in t.slots})
+    return Population(name, [pool[n] for n in used], teams)

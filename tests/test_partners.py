@@ -1,0 +1,107 @@
+"""Learned partner populations: shipped data loads and steps, training is deterministic."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from transam.partners import learned
+from transam.partners.recipes import recipe
+from transam.partners.train import FEATURES, PPOConfig, make_train
+
+ENVS = ("tag", "spread", "overcooked", "lbf")
+OBS_DIMS = {"tag": 16, "spread": 18, "overcooked": 520, "lbf": 18}
+ACTIONS = {"tag": 5, "spread": 5, "overcooked": 6, "lbf": 6}
+
+
+def shipped(env: str) -> list[str]:
+    """Splits of ``env`` present in the package data."""
+    try:
+        manifest = learned.load_manifest(env)
+    except FileNotFoundError:
+        return []
+    return [s for s in learned.SPLITS if s in manifest]
+
+
+@pytest.mark.parametrize("env", ENVS)
+def test_manifest_and_weights_agree(env: str) -> None:
+    splits = shipped(env)
+    assert splits, f"no shipped population for {env}"
+    manifest = learned.load_manifest(env)
+    feat_dim = int(FEATURES[env](jnp.zeros(OBS_DIMS[env])).shape[0])
+    for split in splits:
+        entry = manifest[split]
+        params = learned.load_params(env, split)
+        names = [m["name"] for m in entry["members"]]
+        assert sorted(params) == sorted(names)
+        # The recipe in code names the same members as the shipped manifest.
+        rec = recipe(env, split == "heldout")
+        assert sorted(m[0] for r in rec.runs for m in r.members) == sorted(names)
+        for m in entry["members"]:
+            p = params[m["name"]]["params"]
+            assert p["Dense_0"]["kernel"].shape == (feat_dim, m["hidden"])
+            assert p["Dense_2"]["kernel"].shape == (m["hidden"], ACTIONS[env])
+            for key in ("kind", "recipe", "seed", "shaping", "gamma", "steps", "self_play_return"):
+                assert key in m
+
+
+def test_shipped_data_is_small() -> None:
+    total = sum(
+        f.stat().st_size for env in ENVS for f in learned.data_dir(env).glob("*") if f.is_file()
+    )
+    assert total < 20 * 2**20
+
+
+@pytest.mark.parametrize("env", ENVS)
+def test_every_member_steps_jitted(env: str) -> None:
+    for split in shipped(env):
+        members = learned.learned_members(env, split)
+        obs = jnp.zeros((len(members), OBS_DIMS[env]))
+        acts = [m.act for m in members.values()]
+
+        @jax.jit
+        def all_act(key: jax.Array, obs: jax.Array, acts: list = acts) -> jax.Array:
+            keys = jax.random.split(key, len(acts))
+            return jnp.stack([a(k, o) for a, k, o in zip(acts, keys, obs, strict=True)])
+
+        out = np.asarray(all_act(jax.random.PRNGKey(0), obs))
+        assert out.dtype == np.int32
+        assert ((out >= 0) & (out < ACTIONS[env])).all()
+
+
+@pytest.mark.parametrize("env", ENVS)
+def test_populations_build(env: str) -> None:
+    """Every shipped split builds a population whose teams name shipped or heuristic members."""
+    for split in shipped(env):
+        pop = learned.population(env, split)
+        assert pop.num_others == {"tag": 3, "spread": 2, "overcooked": 1, "lbf": 1}[env]
+        learned_names = set(learned.learned_members(env, split))
+        used = {pop.members[i].name for i in pop.table.ravel()}
+        assert used & learned_names, "a population must use its learned members"
+        assert pop.size == (10 if env == "tag" else len(learned.load_manifest(env)[split]["teams"]))
+
+
+@pytest.mark.parametrize("env", ENVS)
+def test_trained_members_beat_random(env: str) -> None:
+    """Self-play score of every learned run (as measured at training time) beats random play."""
+    entry = learned.load_manifest(env)["default"]
+    for m in entry["members"]:
+        if m["checkpoint"] < max(x["checkpoint"] for x in entry["members"]):
+            continue  # early Spread checkpoints are deliberately weak
+        rnd = entry["random_return"][m["stand_in"]][m["agent"]]
+        assert m["self_play_return"] > rnd, (m["name"], m["self_play_return"], rnd)
+
+
+def test_partner_training_is_deterministic() -> None:
+    view = learned.joint_view("lbf")
+    cfg = PPOConfig(total_steps=16, num_envs=2, rollout_len=8, epochs=1, minibatches=1, hidden=8)
+    w = jnp.zeros((2, 3))
+    outs = [
+        jax.jit(make_train(view, cfg))(jax.random.PRNGKey(3), jnp.float32(0.9), w) for _ in range(2)
+    ]
+    for a, b in zip(jax.tree.leaves(outs[0]), jax.tree.leaves(outs[1]), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    first = jax.tree.leaves(outs[0][0])[0]
+    assert first.shape[:2] == (1, 2)  # [checkpoint, agent, ...]
