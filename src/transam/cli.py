@@ -6,12 +6,15 @@ import os
 import statistics
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Annotated, Literal
 
 import tyro
 from rich.console import Console
 from rich.table import Table
+
+from transam.partners.cli import Partners
+from transam.train.config import ConfigError, TrainConfig
 
 EnvName = Literal["tag", "spread", "overcooked", "lbf"]
 ALL_ENVS: tuple[EnvName, ...] = ("tag", "spread", "overcooked", "lbf")
@@ -178,8 +181,52 @@ class Envs:
         self.cmd.run()
 
 
+@dataclass(frozen=True)
+class Train(TrainConfig):
+    """Train one controlled agent with A2C and an agent model against the environment's partner
+    population; writes config.json, metrics.jsonl, checkpoints and TensorBoard files to --out.
+    Steps are controlled-agent steps summed over parallel environments."""
+
+    def run(self) -> None:
+        _run_train(TrainConfig(**{f.name: getattr(self, f.name) for f in fields(TrainConfig)}))
+
+
+def _run_train(config: TrainConfig) -> None:
+    from transam.train.loop import train
+
+    try:
+        result = train(config)
+    except ConfigError as err:
+        raise SystemExit(f"error: {err}") from None
+    if not result.finished:
+        console.print(f"stopped early; resume with --resume --out {result.run_dir}")
+        return
+    table = Table(title=f"final evaluation: {config.env} / {config.method}")
+    for col in ("seed", "step", "eval return", "std", "action acc", "obs mse"):
+        table.add_column(col, justify="right")
+    for seed, rec in zip(result.seeds, result.final, strict=True):
+        table.add_row(
+            str(seed),
+            f"{rec.get('step', 0):,}",
+            *(_opt(rec.get(f"eval/{k}")) for k in ("return", "return_std")),
+            *(_opt(rec.get(f"eval/{k}")) for k in ("action_accuracy", "obs_mse")),
+        )
+    console.print(table)
+    console.print(
+        f"outputs in {result.run_dir}/: config.json, final.json, metrics.jsonl, checkpoints/, "
+        "tb/ (per seed in seed_S/ when --num-seeds > 1)"
+    )
+
+
+def _opt(x: float | None) -> str:
+    return "-" if x is None else _num(x)
+
+
 Command = (
-    Annotated[Demo, tyro.conf.subcommand("demo")] | Annotated[Envs, tyro.conf.subcommand("envs")]
+    Annotated[Demo, tyro.conf.subcommand("demo")]
+    | Annotated[Envs, tyro.conf.subcommand("envs")]
+    | Annotated[Train, tyro.conf.subcommand("train")]
+    | Annotated[Partners, tyro.conf.subcommand("partners")]
 )
 
 

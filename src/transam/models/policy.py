@@ -1,0 +1,95 @@
+"""The shared A2C policy: LSTM(128) -> Linear(128) + ReLU -> actor logits and critic value.
+
+Every agent-modeling method feeds the same policy with concat(o_t, z_t), as the paper and the
+authors' code do, so that methods differ only in z. The network acts on any leading batch
+shape (the trainer passes [num_envs]); :meth:`Policy.unroll` adds a time axis in front.
+
+The LSTM carry is zeroed inside :meth:`Policy.step` whenever ``first`` is set, so a caller
+cannot leak memory across an episode boundary.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, cast
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+Params = Any
+LSTMCarry = tuple[jax.Array, jax.Array]
+"""(cell state c, hidden state h), each [..., hidden]."""
+
+
+class ActorCriticLSTM(nn.Module):
+    """One step of the recurrent actor-critic on a batch of (o_t, z_t)."""
+
+    num_actions: int
+    hidden: int = 128
+
+    @nn.compact
+    def __call__(
+        self, carry: LSTMCarry, obs: jax.Array, z: jax.Array, first: jax.Array
+    ) -> tuple[LSTMCarry, jax.Array, jax.Array]:
+        keep = ~first[..., None]
+        carry = (jnp.where(keep, carry[0], 0.0), jnp.where(keep, carry[1], 0.0))
+        x = jnp.concatenate([obs, z], axis=-1)
+        carry, y = nn.OptimizedLSTMCell(self.hidden, name="lstm")(carry, x)
+        # Orthogonal init with the usual A2C gains: small actor head (near-uniform policy at
+        # the start), unit critic head.
+        h = nn.Dense(self.hidden, kernel_init=nn.initializers.orthogonal(np.sqrt(2)), name="fc")(y)
+        h = nn.relu(h)
+        logits = nn.Dense(
+            self.num_actions, kernel_init=nn.initializers.orthogonal(0.01), name="actor"
+        )(h)
+        value = nn.Dense(1, kernel_init=nn.initializers.orthogonal(1.0), name="critic")(h)
+        return carry, logits, value[..., 0]
+
+
+@dataclass(frozen=True)
+class Policy:
+    """Pure-function wrapper around :class:`ActorCriticLSTM` (hashable, so usable as static)."""
+
+    num_actions: int
+    hidden: int = 128
+
+    @property
+    def net(self) -> ActorCriticLSTM:
+        return ActorCriticLSTM(self.num_actions, self.hidden)
+
+    def init(self, key: jax.Array, obs_dim: int, z_dim: int) -> Params:
+        """Fresh parameters for observations of width ``obs_dim`` and embeddings of ``z_dim``."""
+        return self.net.init(
+            key,
+            self.init_carry(),
+            jnp.zeros((obs_dim,), jnp.float32),
+            jnp.zeros((z_dim,), jnp.float32),
+            jnp.ones((), bool),
+        )
+
+    def init_carry(self, batch_shape: tuple[int, ...] = ()) -> LSTMCarry:
+        """The all-zero carry (what ``first=True`` resets to)."""
+        zeros = jnp.zeros((*batch_shape, self.hidden), jnp.float32)
+        return (zeros, zeros)
+
+    def step(
+        self, params: Params, carry: LSTMCarry, obs: jax.Array, z: jax.Array, first: jax.Array
+    ) -> tuple[LSTMCarry, jax.Array, jax.Array]:
+        """(new carry, action logits [..., num_actions], value [...]) for one step."""
+        out = self.net.apply(params, carry, obs, z, first)
+        return cast(tuple[LSTMCarry, jax.Array, jax.Array], out)
+
+    def unroll(
+        self, params: Params, carry: LSTMCarry, obs: jax.Array, z: jax.Array, first: jax.Array
+    ) -> tuple[LSTMCarry, jax.Array, jax.Array]:
+        """:meth:`step` over a leading time axis T from ``carry``: (final carry, logits [T, ...],
+        values [T, ...]); the training path, differentiable through time."""
+
+        def body(c: LSTMCarry, inp: tuple[jax.Array, ...]) -> tuple[LSTMCarry, tuple[Any, Any]]:
+            c, logits, value = self.step(params, c, *inp)
+            return c, (logits, value)
+
+        carry, (logits, values) = jax.lax.scan(body, carry, (obs, z, first))
+        return carry, logits, values

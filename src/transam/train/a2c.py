@@ -1,0 +1,416 @@
+"""A2C with an agent model, PureJaxRL style: pure functions, one jitted program per chunk.
+
+One *update* = a rollout of ``n_steps`` (``lax.scan`` over time; environments, agent model and
+policy batched over ``num_envs``), then GAE, the A2C loss and the agent-model loss, their
+gradients and one Adam step for each network (each with its own optimiser and gradient clip).
+:func:`make_chunk` scans U updates into one program; the Python loop around it logs, evaluates
+and checkpoints.
+
+Data flow per step (the execution path sees only :class:`LocalStep` data)::
+
+    z_t = model.step(carry, LocalStep(o_t, a_{t-1}, r_{t-1}, t, first_t))
+    logits_t, V_t = policy(o_t, z_t)            # LSTM carry zeroed when first_t
+    a_t ~ logits_t; env.step -> r_t, done_t, o_{t+1}, PartnerRecord_t (training-only targets)
+    first_{t+1} = done_t; a_t, r_t become 0 in the next LocalStep when done_t
+
+Each rollout stores the carries it started from, so the training path (``policy.unroll``,
+``model.loss`` and, with ``backprop_encoder``, ``model.embed_rollout``) recomputes exactly what
+acting computed, with gradients. Without ``backprop_encoder`` the policy loss reuses the stored
+execution-path z (no second encoder pass). The one deliberate recomputation is the bootstrap
+step on the rollout's last observation: acting on it again after the update (with the new
+parameters) keeps the next rollout exactly on-policy, as PureJaxRL and SB3 do.
+
+Episodes end by time limit or termination alike (``done``); no bootstrapping across ``done``,
+as in the reference A2C. With ``normalize_returns`` the critic predicts standardised returns
+(running mean/std of the GAE returns) and advantages are divided by the same std. The value loss
+is 0.5 * squared error (the paper's A2C objective) times ``vf_coef``. Steps are controlled-agent
+steps summed over parallel environments.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from transam.envs.core import ControlledEnv, EnvState, PartnerRecord
+from transam.models.base import AgentModel, LocalStep
+from transam.models.policy import Policy
+from transam.train.config import TrainConfig
+
+Metrics = dict[str, jax.Array]
+
+
+@struct.dataclass
+class RunningStat:
+    """Running mean and variance of the returns (parallel Welford), for value normalisation."""
+
+    mean: jax.Array
+    var: jax.Array
+    count: jax.Array
+
+    @staticmethod
+    def create() -> RunningStat:
+        return RunningStat(jnp.zeros(()), jnp.ones(()), jnp.full((), 1e-4, jnp.float32))
+
+    def update(self, x: jax.Array) -> RunningStat:
+        b_mean, b_var, b_count = x.mean(), x.var(), jnp.asarray(x.size, jnp.float32)
+        delta = b_mean - self.mean
+        total = self.count + b_count
+        m2 = self.var * self.count + b_var * b_count + delta**2 * self.count * b_count / total
+        return RunningStat(self.mean + delta * b_count / total, m2 / total, total)
+
+    @property
+    def std(self) -> jax.Array:
+        return jnp.sqrt(self.var + 1e-8)
+
+
+@struct.dataclass
+class RunnerState:
+    """Everything a run carries from one update to the next (checkpointed whole).
+
+    Batched leaves have a leading ``num_envs`` axis (and a seed axis in front when seeds are
+    vmapped). ``key`` holds raw key data so the state serialises with msgpack.
+    """
+
+    policy_params: Any
+    policy_opt: Any
+    model_params: Any
+    model_opt: Any
+    env_state: EnvState
+    x: LocalStep  # what the agent knows at its next step
+    policy_carry: Any  # LSTM carry before x
+    model_carry: Any  # agent-model carry before x
+    ret_stat: RunningStat
+    ep_return: jax.Array  # [num_envs] return so far of each running episode
+    key: jax.Array  # raw uint32 key data
+    update: jax.Array  # int32 updates done
+    episodes: jax.Array  # int32 training episodes completed
+
+
+@struct.dataclass
+class Trajectory:
+    """One rollout, time-major ([T, num_envs, ...]), plus the carries it started from."""
+
+    x: LocalStep
+    z: jax.Array  # execution-path embeddings
+    action: jax.Array
+    reward: jax.Array
+    done: jax.Array
+    value: jax.Array  # critic output (normalised scale when normalize_returns)
+    record: PartnerRecord  # training-only targets of the agent-model loss
+    finished_return: jax.Array  # return of the episode that ended at t (0 where none did)
+    policy_carry0: Any
+    model_carry0: Any
+
+
+def steps_per_update(config: TrainConfig) -> int:
+    return config.a2c.num_envs * config.a2c.n_steps
+
+
+def total_updates(config: TrainConfig) -> int:
+    """Updates in the run: total_steps rounded up to whole updates."""
+    return -(-config.total_steps // steps_per_update(config))
+
+
+def make_policy(config: TrainConfig, env: ControlledEnv) -> Policy:
+    return Policy(num_actions=env.spec.num_actions, hidden=config.a2c.hidden)
+
+
+def make_optimizers(config: TrainConfig) -> tuple[optax.GradientTransformation, ...]:
+    """(policy optimiser, agent-model optimiser): each clips its own gradient norm."""
+    a = config.a2c
+    lr: float | optax.Schedule = a.lr
+    if a.anneal_lr:
+        lr = optax.linear_schedule(a.lr, 0.0, total_updates(config))
+    policy_tx = optax.chain(
+        optax.clip_by_global_norm(a.max_grad_norm), optax.adam(lr, eps=a.adam_eps)
+    )
+    model_tx = optax.chain(
+        optax.clip_by_global_norm(a.max_grad_norm), optax.adam(a.model_lr, eps=a.model_adam_eps)
+    )
+    return policy_tx, model_tx
+
+
+def first_step(obs: jax.Array) -> LocalStep:
+    """The LocalStep of a batch of freshly reset environments."""
+    n = obs.shape[:-1]
+    return LocalStep(
+        obs=obs,
+        prev_action=jnp.zeros(n, jnp.int32),
+        prev_reward=jnp.zeros(n, jnp.float32),
+        t=jnp.zeros(n, jnp.int32),
+        first=jnp.ones(n, bool),
+    )
+
+
+def batch_carry(carry: Any, n: int) -> Any:
+    """Copy a single-env carry ``n`` times along a new leading axis."""
+    return jax.tree.map(lambda a: jnp.broadcast_to(a, (n, *jnp.shape(a))), carry)
+
+
+def act(
+    policy: Policy,
+    model: AgentModel,
+    policy_params: Any,
+    model_params: Any,
+    policy_carry: Any,
+    model_carry: Any,
+    x: LocalStep,
+) -> tuple[Any, Any, jax.Array, jax.Array, jax.Array]:
+    """Execution path on a batch: (policy carry, model carry, z, logits, value)."""
+    model_carry, z = jax.vmap(model.step, in_axes=(None, 0, 0))(model_params, model_carry, x)
+    policy_carry, logits, value = policy.step(policy_params, policy_carry, x.obs, z, x.first)
+    return policy_carry, model_carry, z, logits, value
+
+
+def env_step(
+    env: ControlledEnv, key: jax.Array, env_state: EnvState, action: jax.Array
+) -> tuple[EnvState, Any, LocalStep]:
+    """Step a batch of environments; the next LocalStep forgets a_t and r_t at an episode end
+    (the environment has already auto-reset, and ``first`` marks the new episode)."""
+    keys = jax.random.split(key, action.shape[0])
+    env_state, ts = jax.vmap(env.step)(keys, env_state, action)
+    x = LocalStep(
+        obs=ts.obs,
+        prev_action=jnp.where(ts.done, 0, action).astype(jnp.int32),
+        prev_reward=jnp.where(ts.done, 0.0, ts.reward),
+        t=env_state.t,
+        first=ts.done,
+    )
+    return env_state, ts, x
+
+
+def init_runner(
+    config: TrainConfig, env: ControlledEnv, model: AgentModel, key: jax.Array
+) -> RunnerState:
+    """A fresh run: parameters, optimiser states, reset environments, zero carries."""
+    n = config.a2c.num_envs
+    policy = make_policy(config, env)
+    policy_tx, model_tx = make_optimizers(config)
+    k_policy, k_model, k_env, k_run = jax.random.split(key, 4)
+    model_params = model.init(k_model, env.spec)
+    policy_params = policy.init(k_policy, env.spec.obs_dim, model.embed_dim)
+    env_state, obs = jax.vmap(env.reset)(jax.random.split(k_env, n))
+    return RunnerState(
+        policy_params=policy_params,
+        policy_opt=policy_tx.init(policy_params),
+        model_params=model_params,
+        model_opt=model_tx.init(model_params),
+        env_state=env_state,
+        x=first_step(obs),
+        policy_carry=policy.init_carry((n,)),
+        model_carry=batch_carry(model.init_carry(env.spec), n),
+        ret_stat=RunningStat.create(),
+        ep_return=jnp.zeros((n,), jnp.float32),
+        key=jax.random.key_data(k_run),
+        update=jnp.zeros((), jnp.int32),
+        episodes=jnp.zeros((), jnp.int32),
+    )
+
+
+def make_rollout(
+    config: TrainConfig, env: ControlledEnv, model: AgentModel
+) -> Callable[[RunnerState, jax.Array], tuple[RunnerState, Trajectory]]:
+    """``(state, key) -> (state after n_steps, trajectory)`` (pure; not jitted)."""
+    policy = make_policy(config, env)
+
+    def rollout(rs: RunnerState, key: jax.Array) -> tuple[RunnerState, Trajectory]:
+        def body(carry: tuple[Any, ...], key: jax.Array) -> tuple[tuple[Any, ...], Any]:
+            env_state, x, pc, mc, ep_ret = carry
+            k_act, k_env = jax.random.split(key)
+            pc, mc, z, logits, value = act(
+                policy, model, rs.policy_params, rs.model_params, pc, mc, x
+            )
+            action = jax.random.categorical(k_act, logits).astype(jnp.int32)
+            env_state, ts, x_next = env_step(env, k_env, env_state, action)
+            ep_ret = ep_ret + ts.reward
+            finished = jnp.where(ts.done, ep_ret, 0.0)
+            ep_ret = jnp.where(ts.done, 0.0, ep_ret)
+            out = (x, z, action, ts.reward, ts.done, value, ts.record, finished)
+            return (env_state, x_next, pc, mc, ep_ret), out
+
+        init = (rs.env_state, rs.x, rs.policy_carry, rs.model_carry, rs.ep_return)
+        keys = jax.random.split(key, config.a2c.n_steps)
+        (env_state, x, pc, mc, ep_ret), outs = jax.lax.scan(body, init, keys)
+        x_seq, z, action, reward, done, value, record, finished = outs
+        traj = Trajectory(
+            x=x_seq,
+            z=z,
+            action=action,
+            reward=reward,
+            done=done,
+            value=value,
+            record=record,
+            finished_return=finished,
+            policy_carry0=rs.policy_carry,
+            model_carry0=rs.model_carry,
+        )
+        rs = dataclasses.replace(
+            rs,
+            env_state=env_state,
+            x=x,
+            policy_carry=pc,
+            model_carry=mc,
+            ep_return=ep_ret,
+            episodes=rs.episodes + traj.done.sum(dtype=jnp.int32),
+        )
+        return rs, traj
+
+    return rollout
+
+
+def gae(
+    reward: jax.Array,
+    value: jax.Array,
+    done: jax.Array,
+    last_value: jax.Array,
+    gamma: float,
+    lam: float,
+) -> tuple[jax.Array, jax.Array]:
+    """(advantages, returns), time-major; nothing is bootstrapped across ``done``."""
+
+    def body(carry: tuple[jax.Array, jax.Array], inp: tuple[jax.Array, ...]) -> Any:
+        next_adv, next_value = carry
+        r, v, d = inp
+        cont = 1.0 - d.astype(jnp.float32)
+        delta = r + gamma * next_value * cont - v
+        adv = delta + gamma * lam * cont * next_adv
+        return (adv, v), adv
+
+    _, adv = jax.lax.scan(
+        body,
+        (jnp.zeros_like(last_value), last_value),
+        (reward, value, done),
+        reverse=True,
+    )
+    return adv, adv + value
+
+
+def a2c_losses(
+    policy: Policy,
+    policy_params: Any,
+    traj: Trajectory,
+    z: jax.Array,
+    advantages: jax.Array,
+    targets: jax.Array,
+) -> dict[str, jax.Array]:
+    """Policy-gradient, value and entropy terms of the rollout (means over steps and envs)."""
+    _, logits, values = policy.unroll(
+        policy_params, traj.policy_carry0, traj.x.obs, z, traj.x.first
+    )
+    logp_all = jax.nn.log_softmax(logits)
+    logp = jnp.take_along_axis(logp_all, traj.action[..., None], axis=-1)[..., 0]
+    entropy = -(jnp.exp(logp_all) * logp_all).sum(-1).mean()
+    return {
+        "policy_loss": -(jax.lax.stop_gradient(advantages) * logp).mean(),
+        "value_loss": 0.5 * ((values - targets) ** 2).mean(),
+        "entropy": entropy,
+    }
+
+
+def make_update(
+    config: TrainConfig, env: ControlledEnv, model: AgentModel
+) -> Callable[[RunnerState], tuple[RunnerState, Metrics]]:
+    """One A2C + agent-model update (pure; not jitted)."""
+    a = config.a2c
+    policy = make_policy(config, env)
+    policy_tx, model_tx = make_optimizers(config)
+    rollout = make_rollout(config, env, model)
+    n = a.num_envs
+
+    def update(rs: RunnerState) -> tuple[RunnerState, Metrics]:
+        key, k_roll, k_loss = jax.random.split(jax.random.wrap_key_data(rs.key), 3)
+        rs, traj = rollout(rs, k_roll)
+        _, _, _, _, last_value = act(
+            policy, model, rs.policy_params, rs.model_params, rs.policy_carry, rs.model_carry, rs.x
+        )
+        stat = rs.ret_stat
+        if a.normalize_returns:
+            value, last_value = traj.value * stat.std + stat.mean, last_value * stat.std + stat.mean
+        else:
+            value = traj.value
+        adv, returns = gae(traj.reward, value, traj.done, last_value, a.gamma, a.gae_lambda)
+        if a.normalize_returns:
+            # The critic regresses standardised returns, and the advantages are put on the
+            # same scale (as the reference's "normalised return - value"), so that the entropy
+            # bonus weighs the same against them whatever the reward scale.
+            stat = stat.update(returns)
+            targets = (returns - stat.mean) / stat.std
+            adv = adv / stat.std
+        else:
+            targets = returns
+        if a.normalize_advantages:
+            adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+
+        def loss_fn(policy_params: Any, model_params: Any) -> tuple[jax.Array, Metrics]:
+            if a.backprop_encoder:
+                z = jax.vmap(model.embed_rollout, in_axes=(None, 0, 1), out_axes=1)(
+                    model_params, traj.model_carry0, traj.x
+                )
+            else:
+                z = traj.z
+            terms = a2c_losses(policy, policy_params, traj, z, adv, targets)
+            a2c = (
+                terms["policy_loss"]
+                + a.vf_coef * terms["value_loss"]
+                - a.ent_coef * terms["entropy"]
+            )
+            am, am_metrics = jax.vmap(model.loss, in_axes=(None, 0, 1, 1, 0))(
+                model_params,
+                traj.model_carry0,
+                traj.x,
+                traj.record,
+                jax.random.split(k_loss, n),
+            )
+            metrics = dict(terms)
+            metrics["model_loss"] = am.mean()
+            metrics.update({f"model/{k}": v.mean() for k, v in am_metrics.items()})
+            return a2c + am.mean(), metrics
+
+        grad_fn = jax.grad(loss_fn, argnums=(0, 1), has_aux=True)
+        (g_policy, g_model), metrics = grad_fn(rs.policy_params, rs.model_params)
+        upd, policy_opt = policy_tx.update(g_policy, rs.policy_opt, rs.policy_params)
+        policy_params = optax.apply_updates(rs.policy_params, upd)
+        upd, model_opt = model_tx.update(g_model, rs.model_opt, rs.model_params)
+        model_params = optax.apply_updates(rs.model_params, upd)
+        metrics["grad_norm/policy"] = optax.tree.norm(g_policy)
+        metrics["grad_norm/model"] = optax.tree.norm(g_model)
+        metrics["episodes"] = traj.done.sum(dtype=jnp.int32)
+        metrics["return_sum"] = traj.finished_return.sum()
+        rs = dataclasses.replace(
+            rs,
+            policy_params=policy_params,
+            policy_opt=policy_opt,
+            model_params=model_params,
+            model_opt=model_opt,
+            ret_stat=stat,
+            key=jax.random.key_data(key),
+            update=rs.update + 1,
+        )
+        return rs, metrics
+
+    return update
+
+
+def make_chunk(
+    config: TrainConfig, env: ControlledEnv, model: AgentModel, num_updates: int
+) -> Callable[[RunnerState], tuple[RunnerState, Metrics]]:
+    """A jitted ``state -> (state, metrics)`` doing ``num_updates`` updates in one ``lax.scan``.
+
+    Metrics are reduced over the chunk: ``episodes`` and ``return_sum`` are sums (training
+    return = return_sum / episodes), everything else is a mean over updates.
+    """
+    update = make_update(config, env, model)
+
+    def chunk(rs: RunnerState) -> tuple[RunnerState, Metrics]:
+        rs, metrics = jax.lax.scan(lambda s, _: update(s), rs, None, length=num_updates)
+        summed = ("episodes", "return_sum")
+        return rs, {k: v.sum(0) if k in summed else v.mean(0) for k, v in metrics.items()}
+
+    return jax.jit(chunk)

@@ -1,0 +1,192 @@
+"""Typed training configuration (the defaults are the spec's reference settings).
+
+Every setting is a field with a docstring, so ``transam train --help`` lists it. :meth:`validate`
+checks everything up front and raises one :class:`ConfigError` naming the bad value and the
+valid choices, before anything is written to disk.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from transam.envs import ENV_NAMES, EnvError
+from transam.models import METHOD_NAMES
+from transam.models.transam import TransAMConfig
+
+EnvName = Literal["tag", "spread", "overcooked", "lbf"]
+MethodName = Literal["transam", "nam"]
+SeedMode = Literal["vmap", "sequential"]
+
+
+class ConfigError(EnvError):
+    """A bad training setting: the message names the field, the value and the valid range."""
+
+
+@dataclass(frozen=True)
+class A2CConfig:
+    """A2C and optimiser settings (reference: the authors' Spread/Tag code)."""
+
+    num_envs: int = 10
+    """parallel training environments"""
+    n_steps: int = 5
+    """rollout length per update (n-step returns)"""
+    gamma: float = 0.99
+    """discount factor"""
+    gae_lambda: float = 0.95
+    """GAE lambda"""
+    ent_coef: float = 0.01
+    """entropy bonus coefficient (beta)"""
+    vf_coef: float = 1.0
+    """value-loss coefficient (the value loss is 0.5 * squared error, as in the paper)"""
+    normalize_advantages: bool = False
+    """standardise advantages per rollout (the reference A2C does not)"""
+    lr: float = 3e-4
+    """policy Adam learning rate"""
+    adam_eps: float = 1e-5
+    """policy Adam epsilon"""
+    anneal_lr: bool = True
+    """anneal the policy learning rate linearly to 0 over the run"""
+    model_lr: float = 3e-4
+    """agent-model Adam learning rate (its own optimiser, never annealed)"""
+    model_adam_eps: float = 1e-5
+    """agent-model Adam epsilon"""
+    max_grad_norm: float = 0.25
+    """global gradient-norm clip, applied to each network (policy, agent model) separately"""
+    normalize_returns: bool = True
+    """value regresses returns standardised by a running mean/std of returns; advantages are
+    divided by the same std"""
+    backprop_encoder: bool = False
+    """let the RL loss back-propagate into the agent model (reference: it does not)"""
+    hidden: int = 128
+    """LSTM and linear-layer width of the policy"""
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """Evaluation during training (partners drawn uniformly, one episode per env copy)."""
+
+    every_episodes: int = 100
+    """evaluate every this many training episodes' worth of steps (episodes x episode length,
+    summed over parallel envs; equals completed episodes where episodes have a fixed length)"""
+    episodes: int = 100
+    """evaluation episodes (run in parallel)"""
+    greedy: bool = False
+    """act by argmax instead of sampling (the trained A2C policy is stochastic, so the default
+    samples, as the policy is meant to be used)"""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Train one controlled agent with A2C and an agent model, online, against the partner
+    population (partners resampled every episode)."""
+
+    env: EnvName = "spread"
+    """environment"""
+    method: MethodName = "transam"
+    """agent-modeling method"""
+    total_steps: int = 10_000_000
+    """controlled-agent environment steps, summed over parallel envs (rounded up to whole
+    updates)"""
+    seed: int = 0
+    """PRNG seed (with --num-seeds n: seeds seed .. seed+n-1)"""
+    num_seeds: int = 1
+    """independent runs (seeds) in this process"""
+    seed_mode: SeedMode = "vmap"
+    """with several seeds: one vmapped program over all seeds, or the seeds one after another
+    (vmap measured faster on CPU, see benchmarks/train_throughput.py)"""
+    out: str = ""
+    """run directory (default: runs/ENV-METHOD-sSEED)"""
+    resume: bool = False
+    """continue the interrupted run in --out from its last checkpoint"""
+    force: bool = False
+    """start over, deleting a finished or unfinished run in --out"""
+    checkpoint_every: int = 1
+    """write a checkpoint every this many chunks (one chunk = one evaluation interval); the
+    last chunk always writes one"""
+    progress: bool = True
+    """show a progress bar"""
+    a2c: A2CConfig = field(default_factory=A2CConfig)
+    """A2C settings"""
+    model: TransAMConfig = field(default_factory=TransAMConfig)
+    """TransAM encoder settings (ignored by other methods)"""
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    """evaluation settings"""
+
+    @property
+    def run_dir(self) -> str:
+        return self.out or f"runs/{self.env}-{self.method}-s{self.seed}"
+
+    def validate(self) -> TrainConfig:
+        """Raise :class:`ConfigError` for the first bad value; return ``self`` when all is well."""
+        _choice("env", self.env, ENV_NAMES)
+        _choice("method", self.method, METHOD_NAMES)
+        _choice("seed_mode", self.seed_mode, ("vmap", "sequential"))
+        _at_least("total_steps", self.total_steps, 1)
+        _at_least("seed", self.seed, 0)
+        _at_least("num_seeds", self.num_seeds, 1)
+        _at_least("checkpoint_every", self.checkpoint_every, 1)
+        a = self.a2c
+        _at_least("a2c.num_envs", a.num_envs, 1)
+        _at_least("a2c.n_steps", a.n_steps, 1)
+        _at_least("a2c.hidden", a.hidden, 1)
+        _in_range("a2c.gamma", a.gamma, 0.0, 1.0)
+        _in_range("a2c.gae_lambda", a.gae_lambda, 0.0, 1.0)
+        _in_range("a2c.ent_coef", a.ent_coef, 0.0, math.inf)
+        _in_range("a2c.vf_coef", a.vf_coef, 0.0, math.inf)
+        _in_range("a2c.model_lr", a.model_lr, 0.0, math.inf)
+        for name in ("lr", "adam_eps", "model_adam_eps", "max_grad_norm"):
+            _positive(f"a2c.{name}", getattr(a, name))
+        m = self.model
+        _at_least("model.context (K)", m.context, 1)
+        for name in ("width", "layers", "heads", "ff_width"):
+            _at_least(f"model.{name}", getattr(m, name), 1)
+        if m.width % m.heads:
+            raise ConfigError(
+                f"model.width ({m.width}) must be a multiple of model.heads ({m.heads})"
+            )
+        if not 0.0 <= m.dropout < 1.0:
+            raise ConfigError(f"model.dropout must be in [0, 1), got {m.dropout!r}")
+        _choice("model.norm", m.norm, ("post", "pre"))
+        _choice("model.recon_at", m.recon_at, ("all", "last"))
+        _at_least("eval.every_episodes", self.eval.every_episodes, 1)
+        _at_least("eval.episodes", self.eval.episodes, 1)
+        return self
+
+    def identity(self) -> dict[str, Any]:
+        """The settings that define the run (what ``--resume`` must match): all but where it is
+        written and how it is driven."""
+        d = dataclasses.asdict(self)
+        for key in ("out", "resume", "force", "progress"):
+            d.pop(key)
+        return d
+
+
+def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise ConfigError(f"unknown {name} {value!r}; valid choices: {', '.join(choices)}")
+
+
+def _number(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
+        raise ConfigError(f"{name} must be a number, got {value!r}")
+    return float(value)
+
+
+def _at_least(name: str, value: Any, low: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ConfigError(f"{name} must be an integer >= {low}, got {value!r}")
+    if value < low:
+        raise ConfigError(f"{name} must be >= {low}, got {value}")
+
+
+def _in_range(name: str, value: Any, low: float, high: float) -> None:
+    if not low <= _number(name, value) <= high:
+        raise ConfigError(f"{name} must be in [{low}, {high}], got {value!r}")
+
+
+def _positive(name: str, value: Any) -> None:
+    if not _number(name, value) > 0.0 or math.isinf(float(value)):
+        raise ConfigError(f"{name} must be a positive finite number, got {value!r}")

@@ -1,0 +1,513 @@
+"""The Python loop around the jitted chunks: run directory, logging, evaluation, checkpoints.
+
+Run directory (``--out``)::
+
+    config.json            the run's settings (written once, atomically)
+    final.json             written last: the run is finished (its final evaluation per seed)
+    metrics.jsonl          one JSON object per chunk (= per evaluation point)
+    tb/                    TensorBoard event files (same scalars, plus steps/s)
+    checkpoints/           chunk_NNNNNN.msgpack: the whole runner state (last two kept)
+
+With ``--num-seeds n > 1`` the per-seed files (metrics.jsonl, tb/, checkpoints/) sit in
+``seed_S/`` subdirectories and config.json / final.json at the top. Both seed modes write the
+same layout, so a run can be resumed in either mode.
+
+Determinism: every number in metrics.jsonl is computed inside jit from the runner state and
+keys derived from the seed, so the same seed gives the same file, and a resumed run (restored
+from the msgpack checkpoint, which includes RNG keys, optimiser states and the return
+normaliser) gives the same file as an uninterrupted one. Wall-clock numbers (steps/s) go only to
+TensorBoard and the console for that reason. On resume, metrics lines past the checkpoint are
+dropped and recomputed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+import os
+import shutil
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import serialization
+
+from transam import envs
+from transam.envs.core import ControlledEnv
+from transam.models import make_model
+from transam.models.base import AgentModel
+from transam.train.a2c import (
+    RunnerState,
+    init_runner,
+    make_chunk,
+    steps_per_update,
+    total_updates,
+)
+from transam.train.config import ConfigError, TrainConfig
+from transam.train.evaluate import make_evaluate
+
+KEEP_CHECKPOINTS = 2
+OWN_ENTRIES = ("config.json", "final.json", "metrics.jsonl", "tb", "checkpoints")
+
+
+@dataclass(frozen=True)
+class Plan:
+    """How a run splits into jitted chunks (one chunk per evaluation interval)."""
+
+    steps_per_update: int
+    total_updates: int
+    updates_per_chunk: int
+
+    @property
+    def chunks(self) -> list[int]:
+        """Updates in each chunk (the last may be shorter)."""
+        full, rest = divmod(self.total_updates, self.updates_per_chunk)
+        return [self.updates_per_chunk] * full + ([rest] if rest else [])
+
+    @property
+    def total_steps(self) -> int:
+        return self.total_updates * self.steps_per_update
+
+
+def make_plan(config: TrainConfig, episode_len: int) -> Plan:
+    per_update = steps_per_update(config)
+    every = round(config.eval.every_episodes * episode_len / per_update)
+    return Plan(per_update, total_updates(config), max(1, every))
+
+
+@dataclass
+class RunResult:
+    """Where a run wrote its outputs and its final evaluation (one dict per seed)."""
+
+    run_dir: Path
+    seeds: list[int]
+    final: list[dict[str, Any]]
+    finished: bool
+
+
+# ---------------------------------------------------------------- building blocks (cached)
+
+
+@functools.lru_cache(maxsize=8)
+def env_and_model(env: str, method: str, model_config: Any) -> tuple[ControlledEnv, AgentModel]:
+    e = envs.make(env)
+    return e, make_model(method, e.spec, model_config)
+
+
+def _program_key(config: TrainConfig) -> TrainConfig:
+    """The part of the config a compiled program depends on (not the seed or the paths; the
+    run length only through the learning-rate schedule)."""
+    return dataclasses.replace(
+        config,
+        total_steps=config.total_steps if config.a2c.anneal_lr else 1,
+        seed=0,
+        num_seeds=1,
+        seed_mode="vmap",
+        out="",
+        resume=False,
+        force=False,
+        progress=False,
+        checkpoint_every=1,
+    )
+
+
+@dataclass(frozen=True)
+class Programs:
+    init: Callable[[jax.Array], RunnerState]
+    chunks: dict[int, Callable[[RunnerState], tuple[RunnerState, dict[str, jax.Array]]]]
+    evaluate: Callable[[Any, Any, jax.Array], dict[str, jax.Array]]
+    has_decoder: bool
+
+
+@functools.lru_cache(maxsize=8)
+def programs(config: TrainConfig, sizes: tuple[int, ...], vmapped: bool) -> Programs:
+    """Jitted init, chunk (one per chunk size) and evaluation functions; vmapped over a leading
+    seed axis when ``vmapped``. Cached so repeated runs in one process compile once."""
+    from transam.train.evaluate import has_decoder
+
+    env, model = env_and_model(config.env, config.method, config.model)
+
+    def init(key: jax.Array) -> RunnerState:
+        return init_runner(config, env, model, key)
+
+    evaluate = make_evaluate(config, env, model)
+    chunks = {u: make_chunk(config, env, model, u) for u in sizes}
+    if vmapped:
+        init, evaluate = jax.vmap(init), jax.vmap(evaluate)
+        chunks = {u: jax.vmap(f) for u, f in chunks.items()}
+    return Programs(
+        init=jax.jit(init),
+        chunks={u: jax.jit(f) for u, f in chunks.items()},
+        evaluate=jax.jit(evaluate),
+        has_decoder=has_decoder(model, env),
+    )
+
+
+def run_programs(config: TrainConfig, vmapped: bool = False) -> Programs:
+    """The compiled programs a run of ``config`` uses (shared with :func:`train`'s cache)."""
+    env, _ = env_and_model(config.env, config.method, config.model)
+    chunks = make_plan(config, env.spec.episode_len).chunks
+    return programs(_program_key(config), tuple(sorted(set(chunks))), vmapped)
+
+
+# ---------------------------------------------------------------- files
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Write to a temporary file in the same directory, then rename over ``path``."""
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def write_json(path: Path, obj: Any) -> None:
+    write_atomic(path, (json.dumps(obj, indent=2) + "\n").encode())
+
+
+def read_metrics(path: Path) -> list[dict[str, Any]]:
+    """The records of a metrics.jsonl (a torn last line from a kill is skipped)."""
+    if not path.exists():
+        return []
+    records = []
+    for line in path.read_text().splitlines():
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return records
+
+
+def _checkpoints(seed_dir: Path) -> dict[int, Path]:
+    found = {}
+    for p in (seed_dir / "checkpoints").glob("chunk_*.msgpack"):
+        try:
+            found[int(p.stem.split("_")[1])] = p
+        except ValueError:
+            continue
+    return found
+
+
+def _save_checkpoint(seed_dir: Path, chunk: int, state: RunnerState) -> None:
+    ckpt_dir = seed_dir / "checkpoints"
+    ckpt_dir.mkdir(parents=True, exist_ok=True)
+    write_atomic(ckpt_dir / f"chunk_{chunk:06d}.msgpack", serialization.to_bytes(state))
+
+
+def _prune_checkpoints(seed_dir: Path) -> None:
+    for _, p in sorted(_checkpoints(seed_dir).items())[:-KEEP_CHECKPOINTS]:
+        p.unlink(missing_ok=True)
+
+
+class RunDirError(ConfigError):
+    """The run directory holds something that the requested action would overwrite."""
+
+
+def prepare_run_dir(config: TrainConfig) -> str:
+    """Decide what to do with ``--out`` before writing anything: 'fresh', 'resume' or
+    'finished'. Raises :class:`RunDirError` when it would overwrite a run without --force."""
+    out = Path(config.run_dir)
+    if out.exists() and not out.is_dir():
+        raise RunDirError(f"--out {str(out)!r} exists and is not a directory")
+    entries = {p.name for p in out.iterdir()} if out.exists() else set()
+    if not entries:
+        return "fresh"
+    if "config.json" not in entries:
+        raise RunDirError(
+            f"--out {str(out)!r} is not empty and holds no transam run; choose another directory"
+        )
+    finished = "final.json" in entries
+    if config.force:
+        return "fresh"
+    if not config.resume:
+        what = "a finished run" if finished else "an unfinished run"
+        hint = "" if finished else " --resume to continue it, or"
+        raise RunDirError(
+            f"--out {str(out)!r} holds {what}; pass{hint} --force to delete it and start over"
+        )
+    saved = json.loads((out / "config.json").read_text())
+    wanted = json.loads(json.dumps(config.identity()))
+    if saved != wanted:
+        diff = sorted(_diff(saved, wanted))
+        raise RunDirError(
+            f"--resume: settings differ from the run in {str(out)!r}: {', '.join(diff)} "
+            "(resume with the same settings, or --force to start over)"
+        )
+    return "finished" if finished else "resume"
+
+
+def _diff(a: Any, b: Any, prefix: str = "") -> Iterator[str]:
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            yield from _diff(a.get(k), b.get(k), f"{prefix}{k}.")
+    elif a != b:
+        yield f"{prefix.rstrip('.')} (run: {a!r}, now: {b!r})"
+
+
+def _clean(out: Path) -> None:
+    """Delete what a previous run wrote (and nothing else) in ``out``."""
+    for p in out.iterdir():
+        if p.name in OWN_ENTRIES or (p.is_dir() and p.name.startswith("seed_")):
+            shutil.rmtree(p) if p.is_dir() else p.unlink()
+
+
+# ---------------------------------------------------------------- logging
+
+
+def _clean_float(x: Any) -> float | None:
+    v = float(x)
+    return None if math.isnan(v) or math.isinf(v) else v
+
+
+def make_record(
+    chunk: int,
+    seed: int,
+    update: int,
+    episodes: int,
+    train: dict[str, Any],
+    evaluation: dict[str, Any],
+    plan: Plan,
+    config: TrainConfig,
+) -> dict[str, Any]:
+    """One metrics.jsonl line from one seed's host-side chunk and evaluation metrics."""
+    n_eps = int(train["episodes"])
+    rec: dict[str, Any] = {
+        "step": update * plan.steps_per_update,
+        "update": update,
+        "chunk": chunk,
+        "seed": seed,
+        "episodes": episodes,
+        "train/return": float(train["return_sum"]) / n_eps if n_eps else None,
+        "train/episodes": n_eps,
+        "train/lr": policy_lr(config, update - 1),
+    }
+    for k, v in sorted(train.items()):
+        if k not in ("episodes", "return_sum"):
+            rec[f"train/{k.removeprefix('model/')}"] = _clean_float(v)
+    for k in ("return", "return_std", "action_accuracy", "obs_mse"):
+        rec[f"eval/{k}"] = _clean_float(evaluation[k])
+    return rec
+
+
+class TBWriter:
+    """TensorBoard scalars (tensorboardX), or nothing when it is not installed."""
+
+    def __init__(self, logdir: Path, purge_step: int | None) -> None:
+        try:
+            from tensorboardX import SummaryWriter
+        except ImportError:  # optional live view
+            self.writer = None
+            return
+        self.writer = SummaryWriter(str(logdir), purge_step=purge_step, flush_secs=30)
+
+    def write(self, record: dict[str, Any], extra: dict[str, float]) -> None:
+        if self.writer is None:
+            return
+        step = record["step"]
+        for k, v in {**record, **extra}.items():
+            if "/" in k and isinstance(v, int | float) and not isinstance(v, bool):
+                self.writer.add_scalar(k, v, step)
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+
+
+@contextmanager
+def _progress(enabled: bool, total: int, description: str) -> Iterator[Callable[..., None]]:
+    """A rich progress bar over environment steps; yields ``advance(steps, **fields)``."""
+    if not enabled:
+        yield lambda steps, **fields: None
+        return
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    columns = (
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[sps]} steps/s"),
+        TextColumn("return {task.fields[ret]}"),
+        TextColumn("acc {task.fields[acc]}"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
+    with Progress(*columns) as bar:
+        task = bar.add_task(description, total=total, sps="-", ret="-", acc="-")
+
+        def advance(steps: int, **fields: Any) -> None:
+            bar.update(task, advance=steps, **fields)
+
+        yield advance
+
+
+def _fmt(values: list[Any]) -> str:
+    vals = [v for v in values if v is not None]
+    return f"{np.mean(vals):.4g}" if vals else "-"
+
+
+# ---------------------------------------------------------------- the run
+
+
+def seed_dirs(config: TrainConfig) -> list[Path]:
+    out = Path(config.run_dir)
+    seeds = [config.seed + i for i in range(config.num_seeds)]
+    return [out] if config.num_seeds == 1 else [out / f"seed_{s}" for s in seeds]
+
+
+def train(config: TrainConfig, stop_after_chunks: int | None = None) -> RunResult:
+    """Run (or resume) training as ``config`` says. ``stop_after_chunks`` stops early, as a kill
+    would, after that many chunks of this invocation (for tests)."""
+    config.validate()
+    env_and_model(config.env, config.method, config.model)  # bad env/model: fail before writing
+    action = prepare_run_dir(config)
+    out = Path(config.run_dir)
+    seeds = [config.seed + i for i in range(config.num_seeds)]
+    dirs = seed_dirs(config)
+    if action == "finished":
+        final = json.loads((out / "final.json").read_text())
+        return RunResult(out, seeds, final["seeds"], finished=True)
+    if out.exists() and config.force:
+        _clean(out)
+    if action == "fresh" or not (out / "config.json").exists():
+        out.mkdir(parents=True, exist_ok=True)
+        write_json(out / "config.json", config.identity())
+    for d in dirs:
+        d.mkdir(parents=True, exist_ok=True)
+
+    env, _ = env_and_model(config.env, config.method, config.model)
+    plan = make_plan(config, env.spec.episode_len)
+    groups = [list(range(len(seeds)))]
+    if config.seed_mode == "sequential" and len(seeds) > 1:
+        groups = [[i] for i in range(len(seeds))]
+    budget = [stop_after_chunks]
+    finals: list[dict[str, Any]] = [{} for _ in seeds]
+    done = True
+    for group in groups:
+        finished = _run_group(
+            config, plan, [seeds[i] for i in group], [dirs[i] for i in group], budget
+        )
+        done &= finished is not None
+        if finished is not None:
+            for i, rec in zip(group, finished, strict=True):
+                finals[i] = rec
+        else:
+            break
+    if done:
+        write_json(out / "final.json", {"seeds": finals})
+    return RunResult(out, seeds, finals, finished=done)
+
+
+def _run_group(
+    config: TrainConfig,
+    plan: Plan,
+    seeds: list[int],
+    dirs: list[Path],
+    budget: list[int | None],
+) -> list[dict[str, Any]] | None:
+    """Train seeds together (vmapped when several); the final records, or None when stopped."""
+    chunks = plan.chunks
+    vmapped = len(seeds) > 1
+    progs = run_programs(config, vmapped)
+
+    def stack(trees: list[Any]) -> Any:
+        return jax.tree.map(lambda *a: jnp.stack(a), *trees) if vmapped else trees[0]
+
+    def unstack(tree: Any) -> list[Any]:
+        if not vmapped:
+            return [tree]
+        return [jax.tree.map(lambda a, i=i: a[i], tree) for i in range(len(seeds))]
+
+    init_keys, eval_keys = zip(*(jax.random.split(jax.random.key(s)) for s in seeds), strict=True)
+    state = progs.init(stack(list(init_keys)))
+
+    # Resume from the newest chunk checkpointed for every seed of the group.
+    common = set.intersection(*(set(_checkpoints(d)) for d in dirs))
+    start = max(common) + 1 if common else 0
+    if start:
+        template = unstack(jax.device_get(state))[0]
+        state = stack(
+            [
+                serialization.from_bytes(template, _checkpoints(d)[start - 1].read_bytes())
+                for d in dirs
+            ]
+        )
+    for d in dirs:
+        kept = [r for r in read_metrics(d / "metrics.jsonl") if r.get("chunk", -1) < start]
+        write_atomic(d / "metrics.jsonl", "".join(json.dumps(r) + "\n" for r in kept).encode())
+    if start >= len(chunks):
+        return [read_metrics(d / "metrics.jsonl")[-1] for d in dirs]
+
+    done_steps = sum(chunks[:start]) * plan.steps_per_update
+    writers = [TBWriter(d / "tb", done_steps + 1 if start else None) for d in dirs]
+    logs = [open(d / "metrics.jsonl", "a") for d in dirs]  # noqa: SIM115 (closed below)
+    desc = f"{config.env}/{config.method} seed {','.join(map(str, seeds))}"
+    last: list[dict[str, Any]] = []
+    try:
+        with _progress(config.progress, plan.total_steps * len(seeds), desc) as advance:
+            advance(done_steps * len(seeds))
+            for c in range(start, len(chunks)):
+                if budget[0] is not None:
+                    if budget[0] <= 0:
+                        return None
+                    budget[0] -= 1
+                tic = time.perf_counter()
+                state, train_metrics = progs.chunks[chunks[c]](state)
+                jax.block_until_ready(state)
+                seconds = time.perf_counter() - tic
+                ek = stack([jax.random.fold_in(k, c) for k in eval_keys])
+                ev = progs.evaluate(state.policy_params, state.model_params, ek)
+                counts = jax.device_get((state.update, state.episodes, train_metrics, ev))
+                steps = chunks[c] * plan.steps_per_update
+                last = []
+                for i, (upd, eps, tm, em) in enumerate(
+                    zip(*(unstack(x) for x in counts), strict=True)
+                ):
+                    rec = make_record(c, seeds[i], int(upd), int(eps), tm, em, plan, config)
+                    logs[i].write(json.dumps(rec) + "\n")
+                    logs[i].flush()
+                    writers[i].write(rec, {"perf/steps_per_s": steps / seconds})
+                    last.append(rec)
+                if (c + 1) % config.checkpoint_every == 0 or c + 1 == len(chunks):
+                    for d, s in zip(dirs, unstack(jax.device_get(state)), strict=True):
+                        _save_checkpoint(d, c, s)
+                    for d in dirs:
+                        _prune_checkpoints(d)
+                advance(
+                    steps * len(seeds),
+                    sps=f"{steps * len(seeds) / seconds:,.0f}",
+                    ret=_fmt([r["train/return"] for r in last]),
+                    acc=_fmt([r.get("train/action_accuracy") for r in last]),
+                )
+    finally:
+        for f in logs:
+            f.close()
+        for w in writers:
+            w.close()
+    return last
+
+
+def policy_lr(config: TrainConfig, update: int) -> float:
+    """The policy learning rate used by update number ``update`` (0-based), as the optimiser's
+    linear schedule computes it (for logging)."""
+    a = config.a2c
+    if not a.anneal_lr:
+        return a.lr
+    n = total_updates(config)
+    return a.lr * (1.0 - min(max(update, 0), n) / n)
