@@ -139,11 +139,12 @@ def time_training(config: TrainConfig, updates: int, repeats: int, seeds: int = 
         return init_runner(config, env, model, key)
 
     keys = jax.random.split(jax.random.key(config.seed), seeds)
+    states = [jax.jit(init)(k) for k in keys]  # per seed: vmapped inits can hang XLA:CPU
     if seeds > 1:
-        chunk, init = jax.jit(jax.vmap(chunk)), jax.vmap(init)
-        state = jax.jit(init)(keys)
+        chunk = jax.jit(jax.vmap(chunk))
+        state = jax.tree.map(lambda *a: jnp.stack(a), *states)
     else:
-        state = jax.jit(init)(keys[0])
+        state = states[0]
     tic = time.perf_counter()
     compiled = chunk.lower(state).compile()  # type: ignore[attr-defined]
     compile_s = time.perf_counter() - tic

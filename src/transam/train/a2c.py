@@ -197,7 +197,7 @@ def init_runner(
     model_params = model.init(k_model, env.spec)
     policy_params = policy.init(k_policy, env.spec.obs_dim, model.embed_dim)
     env_state, obs = jax.vmap(env.reset)(jax.random.split(k_env, n))
-    return RunnerState(
+    state = RunnerState(
         policy_params=policy_params,
         policy_opt=policy_tx.init(policy_params),
         model_params=model_params,
@@ -212,6 +212,9 @@ def init_runner(
         update=jnp.zeros((), jnp.int32),
         episodes=jnp.zeros((), jnp.int32),
     )
+    # No weak types (e.g. an environment's Python-int step counter): a state restored from a
+    # checkpoint has none, and it must hit the same compiled program as a fresh one.
+    return jax.tree.map(lambda a: jnp.asarray(a, dtype=a.dtype), state)
 
 
 def make_rollout(

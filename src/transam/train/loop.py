@@ -121,7 +121,7 @@ def _program_key(config: TrainConfig) -> TrainConfig:
 
 @dataclass(frozen=True)
 class Programs:
-    init: Callable[[jax.Array], RunnerState]
+    init: Callable[[jax.Array], RunnerState]  # one seed
     chunks: dict[int, Callable[[RunnerState], tuple[RunnerState, dict[str, jax.Array]]]]
     evaluate: Callable[[Any, Any, jax.Array], dict[str, jax.Array]]
     has_decoder: bool
@@ -129,8 +129,9 @@ class Programs:
 
 @functools.lru_cache(maxsize=8)
 def programs(config: TrainConfig, sizes: tuple[int, ...], vmapped: bool) -> Programs:
-    """Jitted init, chunk (one per chunk size) and evaluation functions; vmapped over a leading
-    seed axis when ``vmapped``. Cached so repeated runs in one process compile once."""
+    """Jitted init (one seed), chunk (one per chunk size) and evaluation functions, the latter
+    vmapped over a leading seed axis when ``vmapped``. Cached so repeated runs in one process
+    compile once."""
     from transam.train.evaluate import has_decoder
 
     env, model = env_and_model(config.env, config.method, config.model)
@@ -140,8 +141,8 @@ def programs(config: TrainConfig, sizes: tuple[int, ...], vmapped: bool) -> Prog
 
     evaluate = make_evaluate(config, env, model)
     chunks = {u: make_chunk(config, env, model, u) for u in sizes}
-    if vmapped:
-        init, evaluate = jax.vmap(init), jax.vmap(evaluate)
+    if vmapped:  # init stays per seed: vmapped orthogonal inits (batched QR) hang XLA:CPU
+        evaluate = jax.vmap(evaluate)
         chunks = {u: jax.vmap(f) for u, f in chunks.items()}
     return Programs(
         init=jax.jit(init),
@@ -435,7 +436,7 @@ def _run_group(
         return [jax.tree.map(lambda a, i=i: a[i], tree) for i in range(len(seeds))]
 
     init_keys, eval_keys = zip(*(jax.random.split(jax.random.key(s)) for s in seeds), strict=True)
-    state = progs.init(stack(list(init_keys)))
+    state = stack([progs.init(k) for k in init_keys])
 
     # Resume from the newest chunk checkpointed for every seed of the group.
     common = set.intersection(*(set(_checkpoints(d)) for d in dirs))
