@@ -132,7 +132,7 @@ class Result:
 
 def time_training(config: TrainConfig, updates: int, repeats: int, seeds: int = 1) -> Result:
     """Median env-steps/s (summed over envs and seeds) of a compiled chunk of ``updates``."""
-    env, model = env_and_model(config.env, config.method, config.model)
+    env, model = env_and_model(config)
     chunk = make_chunk(config, env, model, updates)
 
     def init(key: jax.Array) -> Any:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from transam.cli import main
@@ -9,9 +11,11 @@ from transam.cli import main
 
 def test_envs_list_prints_every_environment(capsys: pytest.CaptureFixture[str]) -> None:
     main(["envs", "list"])
-    out = capsys.readouterr().out
+    out = " ".join(capsys.readouterr().out.split())  # undo rich's line wrapping
     for name in ("tag", "spread", "overcooked", "lbf"):
-        assert name in out
+        assert f"Population '{name}-default'" in out  # the shipped learned population
+    main(["envs", "list", "--partners", "heuristic"])
+    assert "Population 'lbf-heuristic'" in " ".join(capsys.readouterr().out.split())
 
 
 def test_envs_bench_prints_a_rate(capsys: pytest.CaptureFixture[str]) -> None:
@@ -20,10 +24,13 @@ def test_envs_bench_prints_a_rate(capsys: pytest.CaptureFixture[str]) -> None:
     assert "spread" in out and "median steps/s" in out
 
 
-def test_demo_prints_per_team_returns(capsys: pytest.CaptureFixture[str]) -> None:
-    main(["demo", "--envs", "lbf", "--episodes", "2", "--num-envs", "16"])
+def test_envs_rollout_prints_per_team_returns(capsys: pytest.CaptureFixture[str]) -> None:
+    main(["envs", "rollout", "--envs", "lbf", "--episodes", "2", "--num-envs", "16"])
     out = capsys.readouterr().out
-    assert "lbf" in out and "mean return" in out
+    assert "lbf-default population" in out and "mean return" in out
+    heldout = ["--partners", "heldout", "--episodes", "1", "--num-envs", "8"]
+    main(["envs", "rollout", "--envs", "lbf", *heldout])
+    assert "lbf-heldout population" in capsys.readouterr().out
 
 
 def test_bad_values_are_rejected_with_the_valid_choices(
@@ -35,3 +42,17 @@ def test_bad_values_are_rejected_with_the_valid_choices(
     assert "pong" in err.out + err.err and "spread" in err.out + err.err
     with pytest.raises(SystemExit, match="--num-envs must be >= 1, got 0"):
         main(["envs", "bench", "--num-envs", "0"])
+
+
+def test_demo_trains_and_compares_with_a_random_agent(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "demo"
+    tiny = ["--model.width", "16", "--model.layers", "1", "--model.heads", "2"]
+    args = ["demo", "--total-steps", "100", "--out", str(out), "--no-progress", *tiny]
+    main([*args, "--a2c.num-envs", "2", "--eval.every-episodes", "2", "--eval.episodes", "4"])
+    text = capsys.readouterr().out
+    assert "final evaluation: spread / transam" in text and "uniformly random agent" in text
+    assert (out / "final.json").exists() and len(
+        (out / "metrics.jsonl").read_text().splitlines()
+    ) == 2

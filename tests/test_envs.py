@@ -95,3 +95,73 @@ def test_bad_inputs_raise_clear_errors(env: ControlledEnv) -> None:
         env.step(jax.random.key(0), state, -1)
     with pytest.raises(EnvError, match=r"got shape \(3,\)"):
         env.step(jax.random.key(0), state, jnp.zeros(3, jnp.int32))
+
+
+# --- partner populations ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", envs.ENV_NAMES)
+def test_default_population_is_the_shipped_one(name: str) -> None:
+    from transam.partners.learned import load_manifest
+
+    pop = envs.make(name).population
+    entry = load_manifest(name)["default"]
+    assert pop.name == f"{name}-default"
+    learned = {m["name"] for m in entry["members"]}
+    members = {m.name: m for m in pop.members}
+    assert learned <= set(members)
+    assert all(members[n].kind != "heuristic" for n in learned)
+    if name == "tag":  # LIAM's table, learned predators in its learned slots
+        assert pop.team_names == tuple(f"liam{i}" for i in range(10))
+        assert {s for t in pop.teams for s in t.slots} >= learned
+    else:
+        assert pop.team_names == tuple(t["name"] for t in entry["teams"])
+
+
+@pytest.mark.parametrize("name", envs.ENV_NAMES)
+def test_heldout_population_differs_from_default(name: str) -> None:
+    default, heldout = (envs.make(name, partners=p).population for p in ("default", "heldout"))
+    assert heldout.name == f"{name}-heldout"
+    # Same member name, other weights (other seeds): actions differ on the same inputs.
+    shared = sorted(
+        {m.name for m in default.members if m.kind != "heuristic"}
+        & {m.name for m in heldout.members if m.kind != "heuristic"}
+    )
+    if not shared:
+        assert set(default.team_names) != set(heldout.team_names)
+        return
+    spec = envs.make(name, partners="heuristic").spec
+    obs = jax.random.uniform(jax.random.key(0), (256, spec.other_obs_dim))
+    keys = jax.random.split(jax.random.key(1), 256)
+
+    def acts(pop):  # type: ignore[no-untyped-def]
+        member = next(m for m in pop.members if m.name == shared[0])
+        return np.asarray(jax.vmap(member.act)(keys, obs))
+
+    assert not np.array_equal(acts(default), acts(heldout))
+
+
+def test_learned_partners_refuse_a_config_they_were_not_trained_for() -> None:
+    lbf, overcooked = envs.config_class("lbf"), envs.config_class("overcooked")
+    with pytest.raises(EnvError, match=r"grid_size=8 \(default 20\).*partners='heuristic'"):
+        envs.make("lbf", lbf(grid_size=8))
+    with pytest.raises(EnvError, match=r"'heldout'.*controlled_slot=1 \(default 0\)"):
+        envs.make("overcooked", overcooked(controlled_slot=1), partners="heldout")
+    with pytest.raises(EnvError, match=r"unknown partners 'best'; valid choices: default, held"):
+        envs.make("spread", partners="best")
+    with pytest.raises(EnvError, match="either population or partners"):
+        envs.make("spread", population=envs.make("spread").population, partners="heuristic")
+    # Reward and episode-length fields never reach the partners: the learned ones still fit.
+    short = envs.make("spread", envs.config_class("spread")(reward="pettingzoo", episode_len=5))
+    assert short.population.name == "spread-default" and short.spec.episode_len == 5
+
+
+def test_heuristic_partners_fit_any_config() -> None:
+    cfg = envs.config_class("lbf")(grid_size=7, num_foods=3, sight=2, penalty=0.25)
+    env = envs.make("lbf", cfg, partners="heuristic")
+    assert env.population.name == "lbf-heuristic"
+    state, obs = env.reset(jax.random.key(0))
+    _, ts = env.step(jax.random.key(1), state, jnp.int32(0))
+    assert obs.shape == (cfg.obs_dim,) and ts.record.other_obs.shape == (1, cfg.obs_dim)
+    cfg = envs.config_class("overcooked")(controlled_slot=1, random_reset=True)
+    assert envs.make("overcooked", cfg, partners="heuristic").num_partners == 5

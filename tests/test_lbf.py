@@ -215,7 +215,14 @@ def test_time_limit_and_terminal_through_the_wrapper() -> None:
     game = LBFGame(CFG)
     g = state([[10, 10], [5, 5]], [1, 4], [[5, 4], [6, 5], [10, 11], [4, 5]], [4, 3, 1, 2])
     obs, other = game.observe(g)
-    start = EnvState(game=g, partner=jnp.int32(lazy), t=jnp.int32(0), obs=obs, other_obs=other)
+    start = EnvState(
+        game=g,
+        partner=jnp.int32(lazy),
+        t=jnp.int32(0),
+        obs=obs,
+        other_obs=other,
+        other_prev_actions=jnp.full((1,), -1, jnp.int32),
+    )
     _, ts = run(start, jnp.zeros(60, jnp.int32).at[0].set(LOAD))
     np.testing.assert_array_equal(np.asarray(ts.done[:4]), [False, False, True, False])
     assert not bool(ts.truncated[2]) and int(ts.record.t[3]) == 0
@@ -224,7 +231,7 @@ def test_time_limit_and_terminal_through_the_wrapper() -> None:
 
 
 def test_jit_vmap_1024_envs_and_same_key_same_trajectory() -> None:
-    env = make_env(CFG)
+    env = make_env(CFG, heuristic_population(CFG))
     rollout = make_random_rollout(env, num_envs=1024, num_steps=60)
     _, a = rollout(jax.random.key(7))
     _, b = rollout(jax.random.key(7))

@@ -266,7 +266,7 @@ def test_controlled_slot_and_start_orientation(bases) -> None:  # type: ignore[n
 def test_population_jit_vmap_1024_same_key_same_trajectory() -> None:
     pop = heuristic_population()
     assert pop.team_names == ("onion", "dish", "cook", "idle", "random") and pop.num_others == 1
-    env = make("overcooked")
+    env = make("overcooked", partners="heuristic")
     rollout = make_random_rollout(env, num_envs=1024, num_steps=8)  # as tests/test_envs.py
     _, a = rollout(jax.random.key(7))
     _, b = rollout(jax.random.key(7))

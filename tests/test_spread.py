@@ -151,7 +151,7 @@ STEPS = 30  # crosses the episode boundary at step 25
 @pytest.fixture(scope="module")
 def rollout():
     """Jitted once: ENVS envs (partner per env given), random controlled actions, STEPS steps."""
-    env = make("spread")
+    env = make("spread", partners="heuristic")
 
     def one(key, partner):
         k0, k1 = jax.random.split(key)

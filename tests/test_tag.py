@@ -314,7 +314,7 @@ def test_population_follows_liam_table():
 
 
 def test_jit_vmap_1024_envs_deterministic():
-    env = make("tag")
+    env = make("tag", partners="heuristic")
     n, steps = 1024, 60
 
     @jax.jit

@@ -13,6 +13,7 @@ import tyro
 from rich.console import Console
 from rich.table import Table
 
+from transam.envs import PartnerChoice
 from transam.partners.cli import Partners
 from transam.train.config import ConfigError, TrainConfig
 
@@ -33,6 +34,9 @@ def _setup_jax() -> None:
 class EnvsList:
     """Print each environment's metadata (sizes, episode length, partner population)."""
 
+    partners: PartnerChoice = "default"
+    """partner population: the shipped learned one, its held-out split, or the scripted one"""
+
     def run(self) -> None:
         from transam import envs
 
@@ -41,7 +45,7 @@ class EnvsList:
             table.add_column(col, no_wrap=True, justify="left" if col == "env" else "right")
         notes = []
         for name in ALL_ENVS:
-            env = envs.make(name)
+            env = envs.make(name, partners=self.partners)
             s = env.spec
             table.add_row(
                 name,
@@ -65,7 +69,7 @@ class EnvsList:
 
 @dataclass
 class EnvsBench:
-    """Steps/s of each environment: random controlled actions, heuristic partners, vmapped copies.
+    """Steps/s of each environment: random controlled actions, partner population, vmapped copies.
 
     Steps are controlled-agent steps summed over the copies; the median of the timed repeats is
     reported (compilation excluded).
@@ -79,6 +83,8 @@ class EnvsBench:
     """steps per timed rollout"""
     repeats: int = 5
     """timed rollouts per environment"""
+    partners: PartnerChoice = "default"
+    """partner population: the shipped learned one, its held-out split, or the scripted one"""
 
     def run(self) -> None:
         from transam import envs
@@ -92,7 +98,8 @@ class EnvsBench:
         for col in ("env", "median steps/s", "min", "max"):
             table.add_column(col, justify="right")
         for name in self.envs:
-            rates = steps_per_second(envs.make(name), self.num_envs, self.steps, self.repeats)
+            env = envs.make(name, partners=self.partners)
+            rates = steps_per_second(env, self.num_envs, self.steps, self.repeats)
             table.add_row(
                 name, f"{statistics.median(rates):,.0f}", f"{min(rates):,.0f}", f"{max(rates):,.0f}"
             )
@@ -100,7 +107,7 @@ class EnvsBench:
 
 
 @dataclass
-class Demo:
+class EnvsRollout:
     """Roll out every environment with its partner population and a random controlled agent,
     and print each partner team's episode returns."""
 
@@ -112,6 +119,8 @@ class Demo:
     """parallel environment copies"""
     seed: int = 0
     """PRNG seed"""
+    partners: PartnerChoice = "default"
+    """partner population: the shipped learned one, its held-out split, or the scripted one"""
 
     def run(self) -> None:
         import jax
@@ -126,7 +135,7 @@ class Demo:
             summary.add_column(col, justify="right", no_wrap=True)
         for name in self.envs:
             start = time.perf_counter()
-            env = envs.make(name)
+            env = envs.make(name, partners=self.partners)
             steps = self.episodes * env.spec.episode_len
             _, ts = make_random_rollout(env, self.num_envs, steps)(jax.random.key(self.seed))
             stats = episode_stats(ts)
@@ -170,11 +179,12 @@ def _check_positive(**values: int) -> None:
 
 @dataclass
 class Envs:
-    """Environment commands: list metadata, benchmark throughput."""
+    """Environment commands: list metadata, benchmark throughput, random-agent rollouts."""
 
     cmd: (
         Annotated[EnvsList, tyro.conf.subcommand("list")]
         | Annotated[EnvsBench, tyro.conf.subcommand("bench")]
+        | Annotated[EnvsRollout, tyro.conf.subcommand("rollout")]
     )
 
     def run(self) -> None:
@@ -191,7 +201,39 @@ class Train(TrainConfig):
         _run_train(TrainConfig(**{f.name: getattr(self, f.name) for f in fields(TrainConfig)}))
 
 
-def _run_train(config: TrainConfig) -> None:
+@dataclass(frozen=True)
+class Demo(TrainConfig):
+    """The main job on built-in defaults: a short TransAM training run on Spread (the reference
+    settings, a few minutes on 2 CPU cores). Prints the evaluation during and after training
+    next to a uniformly random agent on the same evaluation episodes, and where the outputs
+    are. Every `transam train` option applies."""
+
+    total_steps: int = 50_000
+    """controlled-agent environment steps, summed over parallel envs"""
+    out: str = "runs/demo"
+    """run directory"""
+    force: bool = True
+    """start over each time (the demo's own directory)"""
+
+    def run(self) -> None:
+        from transam.train.loop import read_metrics, seed_dirs, uniform_policy_eval
+
+        config = TrainConfig(**{f.name: getattr(self, f.name) for f in fields(TrainConfig)})
+        if not _run_train(config):
+            return
+        records = read_metrics(seed_dirs(config)[0] / "metrics.jsonl")
+        first, last = records[0], records[-1]
+        rand = uniform_policy_eval(config, config.seed, len(records) - 1)["return"]
+        console.print(
+            f"eval return (seed {config.seed}, {config.eval.episodes} episodes, partners drawn "
+            f"uniformly): {_num(first['eval/return'])} after {first['step']:,} steps -> "
+            f"{_num(last['eval/return'])} after {last['step']:,}; a uniformly random agent on "
+            f"the same episodes: {_num(rand)}"
+        )
+
+
+def _run_train(config: TrainConfig) -> bool:
+    """Train and print the final evaluation table; True when the run finished."""
     from transam.train.loop import train
 
     try:
@@ -200,7 +242,7 @@ def _run_train(config: TrainConfig) -> None:
         raise SystemExit(f"error: {err}") from None
     if not result.finished:
         console.print(f"stopped early; resume with --resume --out {result.run_dir}")
-        return
+        return False
     table = Table(title=f"final evaluation: {config.env} / {config.method}")
     for col in ("seed", "step", "eval return", "std", "action acc", "obs mse"):
         table.add_column(col, justify="right")
@@ -216,6 +258,7 @@ def _run_train(config: TrainConfig) -> None:
         f"outputs in {result.run_dir}/: config.json, final.json, metrics.jsonl, checkpoints/, "
         "tb/ (per seed in seed_S/ when --num-seeds > 1)"
     )
+    return True
 
 
 def _opt(x: float | None) -> str:

@@ -93,6 +93,7 @@ class EnvState:
     t: jax.Array  # int32, steps taken in the current episode
     obs: jax.Array  # controlled agent's current observation
     other_obs: jax.Array  # [num_others, other_obs_dim], privileged
+    other_prev_actions: jax.Array  # [num_others] int32: a^{-1}_{t-1}, -1 at t = 0; privileged
 
 
 @struct.dataclass
@@ -191,6 +192,7 @@ class ControlledEnv:
             t=jnp.zeros((), jnp.int32),
             obs=obs,
             other_obs=other_obs,
+            other_prev_actions=jnp.full((self.spec.num_others,), -1, jnp.int32),
         )
         return state, obs
 
@@ -207,7 +209,14 @@ class ControlledEnv:
         timeout = t >= self.spec.episode_len
         done = terminal | timeout
         obs, other_obs = self.game.observe(game_state)
-        cont = EnvState(game=game_state, partner=state.partner, t=t, obs=obs, other_obs=other_obs)
+        cont = EnvState(
+            game=game_state,
+            partner=state.partner,
+            t=t,
+            obs=obs,
+            other_obs=other_obs,
+            other_prev_actions=jnp.asarray(other_actions, jnp.int32),
+        )
         fresh, _ = self.reset(key_reset)
         next_state = jax.tree.map(lambda a, b: jnp.where(done, a, b), fresh, cont)
         record = PartnerRecord(

@@ -45,7 +45,8 @@ lbforaging rule set is about as much code as those adapters.
   grid_size - 1) these are absolute grid coordinates. With a smaller sight a food is visible
   inside the (2*sight+1)^2 window and the other agent when its window coordinates lie in
   [0, 2*sight] (lbforaging's quirk, kept).
-* Partners: the heuristic population of :mod:`transam.partners.lbf` by default.
+* Partners: the shipped learned population by default (:func:`transam.envs.make`); the
+  heuristic one of :mod:`transam.partners.lbf` with ``partners="heuristic"``.
 """
 
 from __future__ import annotations
@@ -338,10 +339,7 @@ def joint_view(config: Config) -> JointView:
     )
 
 
-def make_env(config: Config, population: Population | None = None) -> ControlledEnv:
-    """LBF with ``config``; the heuristic partner population unless one is given."""
-    if population is None:
-        from transam.partners.lbf import heuristic_population
-
-        population = heuristic_population(config)
+def make_env(config: Config, population: Population) -> ControlledEnv:
+    """LBF with ``config`` and ``population``; :func:`transam.envs.make` builds the
+    population from a ``partners`` choice (default: the shipped learned one)."""
     return ControlledEnv(LBFGame(config), population)

@@ -286,10 +286,7 @@ def _face_north(state: State) -> State:
     )
 
 
-def make_env(config: Config, population: Population | None = None) -> ControlledEnv:
-    """The controlled-agent environment; the heuristic population by default."""
-    if population is None:
-        from transam.partners.overcooked import heuristic_population
-
-        population = heuristic_population(config)
+def make_env(config: Config, population: Population) -> ControlledEnv:
+    """Overcooked with ``config`` and ``population``; :func:`transam.envs.make` builds the
+    population from a ``partners`` choice (default: the shipped learned one)."""
     return ControlledEnv(OvercookedGame(config), population)

@@ -67,7 +67,7 @@ def steps_per_second(
     env: ControlledEnv, num_envs: int, num_steps: int, repeats: int
 ) -> list[float]:
     """Environment steps/s (summed over the vmapped copies) of each timed repeat, after a
-    compile-and-warm-up run; random controlled actions, heuristic (or population) partners."""
+    compile-and-warm-up run; random controlled actions, the env's partner population."""
     import time
 
     rollout = make_random_rollout(env, num_envs, num_steps)

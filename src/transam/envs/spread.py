@@ -22,13 +22,15 @@ A test checks every observation and reward against mpe2 on random episodes.
     radii) of the controlled agent, the controlled agent itself included as the openai code does
     (a constant -1 per step; ``self_collision=False`` drops it). It is the controlled agent's own
     reward, not openai's ``collaborative`` sum over the three agents. Returns are on the paper's
-    scale (TransAM -48.8): against the default population, random play scores about -61 per
-    episode (-54 to -70 by team) and the best landmark heuristic about -46 to -58 by team.
+    scale (TransAM -48.8): random play scores about -68 per episode (-80 to -55 by team)
+    against the shipped default population, -62 (-71 to -56) against the heuristic one, and
+    the best landmark heuristic about -46 to -58 by team.
   - ``"pettingzoo"``: mpe2 simple_spread_v3's reward, ``local_ratio * (-collisions with the other
     agents) + (1 - local_ratio) * (-sum of closest distances)`` with local_ratio 0.5 (JaxMARL's
     ``rewards``). With 0.5 it is exactly ``0.5 * (mpe + 1)`` per step.
 * Precision: float32 here, float64 in mpe2; observations agree to about 3e-6 over 25 steps.
-* Partners: the heuristic population of :mod:`transam.partners.spread` by default.
+* Partners: the shipped learned population by default (:func:`transam.envs.make`); the
+  heuristic one of :mod:`transam.partners.spread` with ``partners="heuristic"``.
 """
 
 from __future__ import annotations
@@ -179,10 +181,7 @@ class SpreadGame:
         )
 
 
-def make_env(config: Config, population: Population | None = None) -> ControlledEnv:
-    """Spread with ``config``; the heuristic partner population unless one is given."""
-    if population is None:
-        from transam.partners.spread import heuristic_population
-
-        population = heuristic_population(config)
+def make_env(config: Config, population: Population) -> ControlledEnv:
+    """Spread with ``config`` and ``population``; :func:`transam.envs.make` builds the
+    population from a ``partners`` choice (default: the shipped learned one)."""
     return ControlledEnv(SpreadGame(config), population)

@@ -60,7 +60,6 @@ from transam.envs.core import ControlledEnv, EnvError, GameSpec
 from transam.partners.joint import JointView
 from transam.partners.moves import MPE_ACTION_NAMES
 from transam.partners.population import PolicyFn, Population
-from transam.partners.tag import heuristic_population
 
 with quiet():
     from jaxmarl.environments.mpe.simple import State
@@ -319,8 +318,7 @@ def joint_view(config: Config, prey: PolicyFn) -> JointView:
     )
 
 
-def make_env(config: Config, population: Population | None = None) -> ControlledEnv:
-    """Tag with the given partner population (default: the heuristic LIAM-table population)."""
-    if population is None:
-        population = heuristic_population(config)
+def make_env(config: Config, population: Population) -> ControlledEnv:
+    """Tag with ``config`` and ``population``; :func:`transam.envs.make` builds the
+    population from a ``partners`` choice (default: the shipped learned one)."""
     return ControlledEnv(TagGame(config), population)

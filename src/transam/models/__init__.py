@@ -1,25 +1,70 @@
-"""Agent models (TransAM and the baselines) behind one protocol; see :mod:`transam.models.base`."""
+"""Agent models (TransAM, its ablations and the baselines) behind one protocol; see
+:mod:`transam.models.base`. Every method is built by :func:`make_model` from its name."""
 
 from __future__ import annotations
 
-from typing import Any
+import dataclasses
+from collections.abc import Callable
 
 from transam.envs.core import EnvError, GameSpec
-from transam.models.base import AgentModel, LocalStep
+from transam.models.base import AgentModel, LocalStep, PartnerView
+from transam.models.cail import CAIL
+from transam.models.carl import CARL
+from transam.models.config import BaselineConfig
+from transam.models.liam import LIAM
+from transam.models.nam import NAM
+from transam.models.oracle import Oracle
+from transam.models.pel import PEL
+from transam.models.transam import TransAM, TransAMConfig
 
-METHOD_NAMES: tuple[str, ...] = ("transam", "nam")
+__all__ = [
+    "METHOD_NAMES",
+    "AgentModel",
+    "BaselineConfig",
+    "LocalStep",
+    "PartnerView",
+    "TransAMConfig",
+    "make_model",
+]
 
-__all__ = ["METHOD_NAMES", "AgentModel", "LocalStep", "make_model"]
+Factory = Callable[[GameSpec, TransAMConfig, BaselineConfig], AgentModel]
 
 
-def make_model(method: str, spec: GameSpec, config: Any = None) -> AgentModel:
-    """The agent model ``method`` for environment ``spec`` (``config``: its typed settings)."""
-    if method == "nam":
-        from transam.models.nam import NAM
+def _transformer(**ablation: str) -> Factory:
+    """TransAM with an ablation's settings (its imitation decoder sized as CAIL's)."""
 
-        return NAM(num_actions=spec.num_actions)
-    if method == "transam":
-        from transam.models.transam import TransAM, TransAMConfig
+    def build(spec: GameSpec, t: TransAMConfig, b: BaselineConfig) -> AgentModel:
+        config = dataclasses.replace(t, **ablation)  # type: ignore[arg-type]
+        return TransAM(spec=spec, config=config, decoder_hidden=b.decoder_hidden)
 
-        return TransAM(spec=spec, config=config or TransAMConfig())
-    raise EnvError(f"unknown method {method!r}; valid choices: {', '.join(METHOD_NAMES)}")
+    return build
+
+
+_FACTORIES: dict[str, Factory] = {
+    "transam": _transformer(),
+    "nam": lambda spec, t, b: NAM(num_actions=spec.num_actions),
+    "oracle": lambda spec, t, b: Oracle(spec=spec),  # type: ignore[dict-item,return-value]
+    "liam": lambda spec, t, b: LIAM(spec=spec, config=b),
+    "carl": lambda spec, t, b: CARL(spec=spec, config=b),
+    "cail": lambda spec, t, b: CAIL(spec=spec, config=b),
+    "pel": lambda spec, t, b: PEL(spec=spec, config=t, baseline=b),
+    "transam-fuse": _transformer(tokens="fuse"),
+    "transam-pool": _transformer(pool="mean"),
+    "transam-im": _transformer(decoder="imitate"),
+}
+"""Every method by name: the paper's order is TransAM, baselines, ablations."""
+
+METHOD_NAMES: tuple[str, ...] = tuple(_FACTORIES)
+
+
+def make_model(
+    method: str,
+    spec: GameSpec,
+    transformer: TransAMConfig | None = None,
+    baseline: BaselineConfig | None = None,
+) -> AgentModel:
+    """The agent model ``method`` for environment ``spec``; ``transformer`` configures the
+    transformer encoders (TransAM, its ablations, PEL), ``baseline`` the others."""
+    if method not in _FACTORIES:
+        raise EnvError(f"unknown method {method!r}; valid choices: {', '.join(METHOD_NAMES)}")
+    return _FACTORIES[method](spec, transformer or TransAMConfig(), baseline or BaselineConfig())

@@ -5,14 +5,17 @@ policy conditions on. It has three parts, and the types keep execution honest:
 
 * ``step`` (execution path): one step of *local* data (:class:`LocalStep`) and a carry (context
   window, recurrent state) -> new carry and z_t. It never receives partner data: its input type
-  has no field for it. Only a model with ``privileged = True`` (the Oracle baseline) is handed
-  :class:`~transam.envs.core.EnvState`-derived partner data, through a separate argument.
+  has no field for it and its signature no argument for it. Only a :class:`PrivilegedModel`
+  (``privileged = True``: the Oracle baseline) takes a :class:`PartnerView` as well.
 * ``embed_rollout`` (training path): the same z for a whole rollout of T steps, recomputed with
   gradients from the carry at the rollout's start. It must equal ``step`` applied in sequence.
-* ``loss``: the auxiliary agent-modeling loss, which may use the training-only
+* ``loss``: the auxiliary agent-modeling loss over a *batch* of rollouts (contrastive losses
+  compare environments), which may use the training-only
   :class:`~transam.envs.core.PartnerRecord` targets.
+* ``decode``: the training-only decoder on one embedding, for evaluation metrics.
 
-All functions act on ONE environment (no batch axis); the trainer vmaps them.
+``step``, ``embed_rollout`` and ``decode`` act on ONE environment (no batch axis); the trainer
+vmaps them. ``loss`` takes the trainer's time-major batch.
 Episode boundaries: a step with ``first = True`` starts a new episode, and the model must not
 let anything from before it influence z (the carry is reset inside ``step`` itself, so no caller
 can forget to).
@@ -40,6 +43,19 @@ class LocalStep:
     prev_reward: jax.Array  # r_{t-1} float32 (0 when ``first``)
     t: jax.Array  # int32 index of o_t within its episode
     first: jax.Array  # bool: o_t is the first observation of an episode
+
+
+@struct.dataclass
+class PartnerView:
+    """Privileged execution-time input of the Oracle: the other agents' data at step t."""
+
+    other_obs: jax.Array  # o^{-1}_t [num_others, other_obs_dim]
+    other_prev_actions: jax.Array  # a^{-1}_{t-1} [num_others] int32, -1 at an episode's start
+
+
+Decoded = tuple[jax.Array | None, jax.Array | None]
+"""(predicted joint other-agent observation [num_others * other_obs_dim] or None, other agents'
+action logits [num_others, other_num_actions] or None)."""
 
 
 class AgentModel(Protocol):
@@ -75,10 +91,11 @@ class AgentModel(Protocol):
         the carry the execution path had before ``xs[0]``; equals ``step`` applied in order."""
         ...
 
-    def decode(self, params: Params, z: jax.Array) -> tuple[jax.Array, jax.Array] | None:
-        """The reconstruction head on one embedding: (predicted joint other-agent observation
-        [num_others * other_obs_dim], other agents' action logits [num_others, other_actions]),
-        or None for a model without one. Used for evaluation metrics at execution time."""
+    def decode(self, params: Params, z: jax.Array, other_obs: jax.Array) -> Decoded:
+        """The training-only decoder on one embedding z_t: what it predicts of the other agents
+        (None for what it does not). ``other_obs`` [num_others, other_obs_dim] is o^{-1}_t, the
+        input of a conditional-imitation decoder; a reconstruction head ignores it. Used for the
+        evaluation metrics (action accuracy, observation MSE)."""
         ...
 
     def loss(
@@ -87,8 +104,22 @@ class AgentModel(Protocol):
         carry: Carry,
         xs: LocalStep,
         targets: PartnerRecord,
-        key: jax.Array,
+        key: jax.Array | None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
-        """Auxiliary loss over the rollout and its metrics (e.g. ``action_accuracy``,
-        ``obs_mse``); ``targets`` line up with ``xs`` in time. Zero for models without one."""
+        """Auxiliary loss and its scalar metrics (e.g. ``action_accuracy``, ``obs_mse``) over a
+        batch of rollouts: ``carry`` [N, ...] (before each rollout), ``xs`` and ``targets``
+        time-major [T, N, ...], lined up in time. ``key`` enables dropout (None: deterministic).
+        Zero and no metrics for models without one."""
         ...
+
+
+class PrivilegedModel(AgentModel, Protocol):
+    """A model whose execution path also sees the other agents (the Oracle upper bound)."""
+
+    def step(  # type: ignore[override]
+        self, params: Params, carry: Carry, x: LocalStep, partner: PartnerView
+    ) -> tuple[Carry, jax.Array]: ...
+
+    def embed_rollout(  # type: ignore[override]
+        self, params: Params, carry: Carry, xs: LocalStep, partner: PartnerView
+    ) -> jax.Array: ...

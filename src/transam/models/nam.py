@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import Carry, LocalStep, Params
+from transam.models.base import Carry, Decoded, LocalStep, Params
 
 
 @dataclass(frozen=True)
@@ -41,10 +41,15 @@ class NAM:
     def embed_rollout(self, params: Params, carry: Carry, xs: LocalStep) -> jax.Array:
         return jax.vmap(self._z)(xs)
 
-    def decode(self, params: Params, z: jax.Array) -> None:
-        return None
+    def decode(self, params: Params, z: jax.Array, other_obs: jax.Array) -> Decoded:
+        return None, None
 
     def loss(
-        self, params: Params, carry: Carry, xs: LocalStep, targets: PartnerRecord, key: jax.Array
+        self,
+        params: Params,
+        carry: Carry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         return jnp.zeros((), jnp.float32), {}

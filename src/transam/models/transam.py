@@ -24,6 +24,24 @@
   supervised in more windows than a late one.
 * Padding: the reference fills padded action slots with a constant; here padded entries are
   masked and zeroed, so their content is irrelevant.
+
+Ablations (the paper's Table of architecture variants), as :class:`TransAMConfig` settings whose
+defaults are TransAM; the method names ``transam-fuse``, ``-pool``, ``-im`` select them:
+
+* ``tokens="fuse"``: concat(r_{t-1}, one-hot a_{t-1}, o_t) through ONE linear layer, one token
+  per step (K tokens; same position embedding and LayerNorm); z is that token's output.
+* ``pool="mean"``: z_t is the mean of the window's observation-token outputs over its valid
+  steps (padding and earlier episodes excluded), instead of the newest one. The decoder is
+  trained on that pooled z_t against step t's targets (one term per window; ``recon_at`` does
+  not apply), so the head is trained on exactly what the policy and ``decode`` see; per-position
+  reconstruction would train an encoder identical to TransAM's and evaluate its head off the
+  distribution it was trained on.
+* ``decoder="imitate"``: the conditional-imitation decoder of CAIL
+  (:class:`~transam.models.heads.ImitationHead`, pi(a^{-1,i}_t | o^{-1,i}_t, z), width
+  ``decoder_hidden``) in place of the reconstruction head; loss = mean over the other agents of
+  the cross-entropy, at the same positions as the reconstruction (``recon_at``), each position
+  given o^{-1} of its own step. No observation prediction: ``decode`` returns (None, logits)
+  and there is no ``obs_mse`` metric.
 """
 
 from __future__ import annotations
@@ -40,7 +58,8 @@ import optax
 from flax import struct
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import LocalStep, Params
+from transam.models.base import Decoded, LocalStep, Params
+from transam.models.heads import ImitationHead
 
 
 @dataclass(frozen=True)
@@ -65,7 +84,13 @@ class TransAMConfig:
     """causal attention inside the window (the paper's encoder attends to the whole window)"""
     recon_at: Literal["all", "last"] = "all"
     """reconstruct at every valid observation position of each window (authors' code) or only
-    at the newest"""
+    at the newest (ignored with ``pool="mean"``: one pooled z per window)"""
+    tokens: Literal["separate", "fuse"] = "separate"
+    """a token per modality (r, a, o: 3K tokens) or one fused token per step (TransAM-fuse)"""
+    pool: Literal["last", "mean"] = "last"
+    """z = the newest observation-token output, or their mean over the window (TransAM-pool)"""
+    decoder: Literal["reconstruct", "imitate"] = "reconstruct"
+    """reconstruct others' observations and actions, or imitate their actions (TransAM-im)"""
 
 
 # --------------------------------------------------------------------------------------------
@@ -178,26 +203,26 @@ class _Encoder(nn.Module):
         # Clipped: jnp.take would read NaN past the table (an episode longer than episode_len).
         t = jnp.clip(jnp.where(valid, w.t, 0), 0, self.episode_len - 1)
         pos = nn.Embed(self.episode_len, cfg.width, name="embed_t")(t)
-        tokens = (
-            jnp.stack(
-                [
-                    nn.Dense(cfg.width, name="embed_r")(reward),
-                    nn.Dense(cfg.width, name="embed_a")(action),
-                    nn.Dense(cfg.width, name="embed_o")(obs),
-                ],
-                axis=-2,
-            )
-            + pos[..., None, :]
-        )  # [..., K, 3, width]: (r_{t-1}, a_{t-1}, o_t) per step
-        x = nn.LayerNorm(name="embed_ln")(tokens.reshape(*batch, 3 * k, cfg.width))
+        if cfg.tokens == "separate":  # (r_{t-1}, a_{t-1}, o_t) per step
+            step_tokens = [
+                nn.Dense(cfg.width, name="embed_r")(reward),
+                nn.Dense(cfg.width, name="embed_a")(action),
+                nn.Dense(cfg.width, name="embed_o")(obs),
+            ]
+        else:  # one token per step from concat(r_{t-1}, a_{t-1}, o_t)
+            fused = jnp.concatenate([reward, action, obs], axis=-1)
+            step_tokens = [nn.Dense(cfg.width, name="embed_step")(fused)]
+        n = len(step_tokens)  # tokens per step; the observation's (or the fused) token is last
+        tokens = jnp.stack(step_tokens, axis=-2) + pos[..., None, :]  # [..., K, n, width]
+        x = nn.LayerNorm(name="embed_ln")(tokens.reshape(*batch, n * k, cfg.width))
 
-        tok_valid = jnp.repeat(valid, 3, axis=-1)  # [..., 3K]
+        tok_valid = jnp.repeat(valid, n, axis=-1)  # [..., nK]
         mask = tok_valid[..., :, None] & tok_valid[..., None, :]  # [..., query, key]
         if cfg.causal:
-            mask = mask & jnp.tril(jnp.ones((3 * k, 3 * k), bool))
+            mask = mask & jnp.tril(jnp.ones((n * k, n * k), bool))
         # Padding queries attend to themselves only: no fully masked row; valid queries are
         # unaffected (their own key is valid anyway).
-        mask = mask | jnp.eye(3 * k, dtype=bool)
+        mask = mask | jnp.eye(n * k, dtype=bool)
         blocks = nn.scan(
             _Block,
             variable_axes={"params": 0},
@@ -208,7 +233,7 @@ class _Encoder(nn.Module):
         x, _ = blocks(x, mask[..., None, :, :])  # heads axis broadcast
         if cfg.norm == "pre":
             x = nn.LayerNorm(name="ln_final")(x)
-        return x.reshape(*batch, k, 3, cfg.width)[..., 2, :]
+        return x.reshape(*batch, k, n, cfg.width)[..., -1, :]
 
 
 class _Head(nn.Module):
@@ -233,7 +258,12 @@ def _init_params(model: TransAM, key: jax.Array) -> Params:
     window = jax.eval_shape(lambda: model.init_carry(model.spec))
     enc = model._encoder(True).lazy_init(key_enc, window)["params"]
     z = jax.ShapeDtypeStruct((model.config.width,), jnp.float32)
-    head = model._head().lazy_init(key_head, z)["params"]
+    if model.config.decoder == "reconstruct":
+        head = model._head().lazy_init(key_head, z)["params"]
+    else:
+        s = model.spec
+        other_obs = jax.ShapeDtypeStruct((s.num_others, s.other_obs_dim), jnp.float32)
+        head = model._head().lazy_init(key_head, z, other_obs)["params"]
     return {"encoder": enc, "head": head}
 
 
@@ -242,12 +272,14 @@ class TransAM:
     """TransAM as an :class:`~transam.models.base.AgentModel` (one environment, no batch axis).
 
     Parameters: ``{"encoder": ..., "head": ...}``; the head is used only by ``loss``/``decode``.
+    ``decoder_hidden`` is the imitation decoder's width (``decoder="imitate"`` only; the factory
+    passes ``BaselineConfig.decoder_hidden``, so TransAM-im's decoder is CAIL's).
     """
 
     spec: GameSpec
     config: TransAMConfig = TransAMConfig()
-    name = "transam"  # class attributes, not fields: fixed for the method
-    privileged = False
+    decoder_hidden: int = 128
+    privileged = False  # a class attribute, not a field: fixed for the method
 
     def __post_init__(self) -> None:
         cfg = self.config
@@ -259,6 +291,27 @@ class TransAM:
             raise ValueError(f"TransAM dropout must be in [0, 1); got {cfg.dropout}")
         if cfg.norm not in ("post", "pre") or cfg.recon_at not in ("all", "last"):
             raise ValueError(f"TransAM norm/recon_at invalid: {cfg.norm!r}, {cfg.recon_at!r}")
+        if (
+            cfg.tokens not in ("separate", "fuse")
+            or cfg.pool not in ("last", "mean")
+            or cfg.decoder not in ("reconstruct", "imitate")
+        ):
+            raise ValueError(
+                f"TransAM tokens/pool/decoder invalid: {cfg.tokens!r}, {cfg.pool!r}, "
+                f"{cfg.decoder!r}; valid: separate|fuse, last|mean, reconstruct|imitate"
+            )
+        if self.decoder_hidden < 1:
+            raise ValueError(f"TransAM decoder_hidden must be >= 1; got {self.decoder_hidden}")
+
+    @property
+    def name(self) -> str:
+        """``transam``, with the ablations in use as suffixes (``transam-fuse``, ...)."""
+        cfg = self.config
+        parts = ["transam"]
+        parts += ["fuse"] if cfg.tokens == "fuse" else []
+        parts += ["pool"] if cfg.pool == "mean" else []
+        parts += ["im"] if cfg.decoder == "imitate" else []
+        return "-".join(parts)
 
     @property
     def embed_dim(self) -> int:
@@ -269,8 +322,10 @@ class TransAM:
     def _encoder(self, deterministic: bool) -> _Encoder:
         return _Encoder(self.config, self.spec.num_actions, self.spec.episode_len, deterministic)
 
-    def _head(self) -> _Head:
+    def _head(self) -> _Head | ImitationHead:
         s = self.spec
+        if self.config.decoder == "imitate":
+            return ImitationHead(s.num_others, s.other_num_actions, self.decoder_hidden)
         return _Head(s.num_others, s.other_obs_dim, s.other_num_actions)
 
     def _encode(self, params: Params, w: WindowCarry, key: jax.Array | None = None) -> jax.Array:
@@ -282,6 +337,14 @@ class TransAM:
             out = self._encoder(False).apply(variables, w, rngs={"dropout": key})
         return cast(jax.Array, out)
 
+    def _pool(self, emb: jax.Array, valid: jax.Array) -> jax.Array:
+        """z [..., width] of windows from their E^o [..., K, width]: the newest, or the mean over
+        the valid steps (padding and earlier episodes excluded)."""
+        if self.config.pool == "last":
+            return emb[..., -1, :]
+        w = valid[..., None].astype(emb.dtype)
+        return jnp.sum(emb * w, axis=-2) / jnp.maximum(jnp.sum(w, axis=-2), 1.0)
+
     # -- protocol --------------------------------------------------------------------------------
 
     def init(self, key: jax.Array, spec: GameSpec) -> Params:
@@ -290,9 +353,9 @@ class TransAM:
         # Settings that do not change the parameters are normalised so that models differing
         # only in them share one compiled init.
         shape_cfg = dataclasses.replace(
-            self.config, context=1, dropout=0.0, causal=False, recon_at="all"
+            self.config, context=1, dropout=0.0, causal=False, recon_at="all", pool="last"
         )
-        return _init_params(TransAM(self.spec, shape_cfg), key)
+        return _init_params(dataclasses.replace(self, config=shape_cfg), key)
 
     def init_carry(self, spec: GameSpec) -> WindowCarry:
         k = self.config.context
@@ -319,7 +382,7 @@ class TransAM:
         self, params: Params, carry: WindowCarry, x: LocalStep
     ) -> tuple[WindowCarry, jax.Array]:
         carry = self.push(carry, x)
-        z = self._encode(params, carry)[-1]
+        z = self._pool(self._encode(params, carry), carry.valid)
         return carry, z
 
     def _windows(self, carry: WindowCarry, xs: LocalStep) -> WindowCarry:
@@ -341,11 +404,18 @@ class TransAM:
         return win.replace(valid=win.valid & same)
 
     def embed_rollout(self, params: Params, carry: WindowCarry, xs: LocalStep) -> jax.Array:
-        return self._encode(params, self._windows(carry, xs))[:, -1]
+        win = self._windows(carry, xs)
+        return self._pool(self._encode(params, win), win.valid)
 
-    def decode(self, params: Params, z: jax.Array) -> tuple[jax.Array, jax.Array]:
-        out = self._head().apply({"params": params["head"]}, z)
-        return cast(tuple[jax.Array, jax.Array], out)
+    def decode(self, params: Params, z: jax.Array, other_obs: jax.Array | None = None) -> Decoded:
+        """(joint other-agent obs, action logits) from z [..., width]; with
+        ``decoder="imitate"``, (None, logits) from z and ``other_obs`` [..., N, D] (required)."""
+        variables = {"params": params["head"]}
+        if self.config.decoder == "reconstruct":
+            return cast(Decoded, self._head().apply(variables, z))
+        if other_obs is None:
+            raise ValueError("TransAM's imitation decoder needs other_obs (o^{-1}_t)")
+        return None, cast(jax.Array, self._head().apply(variables, z, other_obs))
 
     def loss(
         self,
@@ -355,37 +425,62 @@ class TransAM:
         targets: PartnerRecord,
         key: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
-        """Reconstruction loss over the rollout's windows (dropout only when ``key`` is given).
+        """:meth:`rollout_loss` averaged over a batch of rollouts (time-major [T, N])."""
+        n = xs.first.shape[1]
+        keys = None if key is None else jax.random.split(key, n)
+        fn = jax.vmap(self.rollout_loss, in_axes=(None, 0, 1, 1, 0))
+        total, metrics = fn(params, carry, xs, targets, keys)
+        return total.mean(), {k: v.mean() for k, v in metrics.items()}
+
+    def rollout_loss(
+        self,
+        params: Params,
+        carry: WindowCarry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array]]:
+        """Decoder loss over ONE rollout's windows (dropout only when ``key`` is given).
 
         Window i ends at rollout step i; its observation position k holds rollout step
-        j = i + k - (K-1), reconstructed from E^o at that position (``recon_at="all"``: every
+        j = i + k - (K-1), decoded from E^o at that position (``recon_at="all"``: every
         valid position with j >= 0; positions from before the rollout have no targets here and
         are masked; ``"last"``: only k = K-1). Each position weighs the same. Per position:
-        MSE (mean over the joint observation's elements) + mean over the other agents of the
-        cross-entropy of their action logits. Metrics use the newest positions only (what
-        execution uses).
+        MSE (mean over the joint observation's elements; not with ``decoder="imitate"``) + mean
+        over the other agents of the cross-entropy of their action logits (the imitation decoder
+        also gets o^{-1}_j). With ``pool="mean"`` the decoded embedding is the pooled z_i (what
+        the policy and ``decode`` see), scored against step i only. Metrics use the newest
+        positions only (what execution uses).
         """
         k = self.config.context
         num_steps = xs.obs.shape[0]
         win = self._windows(carry, xs)
         emb = self._encode(params, win, key)  # [T, K, width]
-        pred_obs, logits = self.decode(params, emb)  # [T, K, N*D], [T, K, N, A]
         j = jnp.arange(num_steps)[:, None] + jnp.arange(k)[None, :] - (k - 1)
-        jc = jnp.clip(j, 0, num_steps - 1)
-        tgt_obs = targets.other_obs.reshape(num_steps, -1).astype(jnp.float32)[jc]
-        tgt_act = targets.other_actions.astype(jnp.int32)[jc]  # [T, K, N]
-        mse = jnp.mean((pred_obs - tgt_obs) ** 2, axis=-1)  # [T, K]
-        ce_each = optax.softmax_cross_entropy_with_integer_labels(logits, tgt_act)  # [T, K, N]
-        ce = jnp.mean(ce_each, axis=-1)
-        if self.config.recon_at == "all":
+        if self.config.pool == "mean":  # one decoded embedding per window: [T, 1, width]
+            emb, j = self._pool(emb, win.valid)[:, None], jnp.arange(num_steps)[:, None]
+            weight = jnp.ones(j.shape)
+        elif self.config.recon_at == "all":
             weight = (win.valid & (j >= 0)).astype(jnp.float32)
         else:
             weight = jnp.zeros((num_steps, k)).at[:, -1].set(1.0)
-        total = jnp.sum((mse + ce) * weight) / jnp.maximum(jnp.sum(weight), 1.0)
+        jc = jnp.clip(j, 0, num_steps - 1)  # [T, P] with P = K or 1 positions
+        tgt_other = targets.other_obs.astype(jnp.float32)[jc]  # [T, P, N, D]
+        tgt_act = targets.other_actions.astype(jnp.int32)[jc]  # [T, P, N]
+        pred_obs, logits = self.decode(params, emb, tgt_other)  # [T, P, N*D] | None, [T, P, N, A]
+        assert logits is not None  # both decoders predict actions
+        ce_each = optax.softmax_cross_entropy_with_integer_labels(logits, tgt_act)  # [T, P, N]
+        ce = jnp.mean(ce_each, axis=-1)
         correct = jnp.argmax(logits[:, -1], axis=-1) == tgt_act[:, -1]
         metrics = {
-            "obs_mse": jnp.mean(mse[:, -1]),
             "action_ce": jnp.mean(ce[:, -1]),
             "action_accuracy": jnp.mean(correct.astype(jnp.float32)),
         }
+        per_position = ce
+        if pred_obs is not None:
+            tgt_obs = tgt_other.reshape(*tgt_other.shape[:2], -1)
+            mse = jnp.mean((pred_obs - tgt_obs) ** 2, axis=-1)  # [T, P]
+            per_position = per_position + mse
+            metrics["obs_mse"] = jnp.mean(mse[:, -1])
+        total = jnp.sum(per_position * weight) / jnp.maximum(jnp.sum(weight), 1.0)
         return total, metrics

@@ -1,4 +1,4 @@
-"""Heuristic LBF partners (lbforaging's H1-H4 and two simple variants) and the default population.
+"""Heuristic LBF partners (lbforaging's H1-H4 and two simple variants) and their population.
 
 Every policy is a pure function of (key, the agent's own vector observation, layout in
 :mod:`transam.envs.lbf`). H1-H4 follow lbforaging's ``heuristic_agent.py``:
@@ -133,7 +133,7 @@ def heuristic_members(config: Config) -> tuple[Member, ...]:
 
 
 def heuristic_population(config: Config) -> Population:
-    """The default LBF population: one team per heuristic member (one partner slot)."""
+    """The heuristic LBF population (``partners="heuristic"``): one team per heuristic member."""
     members = heuristic_members(config)
     teams = [Team(m.name, (m.name,)) for m in members]
     return Population("lbf-heuristic", members, teams)

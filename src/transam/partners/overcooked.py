@@ -296,7 +296,7 @@ def heuristic_members(eps: float = 0.05) -> list[Member]:
 
 
 def heuristic_population(config: Config | None = None) -> Population:
-    """Default partners: one team per scripted member (the single partner slot)."""
+    """The heuristic population (``partners="heuristic"``): one team per scripted member."""
     members = heuristic_members()
     teams = [
         Team("onion", ("onion_carrier",)),

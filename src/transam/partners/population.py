@@ -5,8 +5,13 @@ observation. Heuristic members are plain JAX functions; a learned member is the 
 function closing over its (fixed) network parameters, so heuristic and neural members mix
 freely. A *team* (joint policy m) assigns one member to each slot of the other agents.
 
-At each step, slot j runs ``lax.switch`` over just the members that ever appear in slot j, so
-a population pays only for the policies it can actually use there.
+At each step, slot j runs just the members that ever appear in slot j, so a population pays
+only for the policies it can actually use there. Every such member acts and the team's own
+action is picked (not ``lax.switch``): environments are vmapped with a different team per copy,
+and switch's batching rule then runs every branch anyway, after broadcasting each branch's
+closed-over constants (a learned member's weights) to the batch: for Overcooked's 8 learned
+members and 1024 copies, 1.07 s per step instead of 12.6 ms (2 CPU cores). The chosen member
+gets the same key, so the actions are those a switch would give.
 """
 
 from __future__ import annotations
@@ -87,11 +92,8 @@ class Population:
         actions = []
         for j in range(self.num_others):
             branches = [self.members[m].act for m in self._slot_members[j]]
-            if len(branches) == 1:
-                a = branches[0](keys[j], other_obs[j])
-            else:
-                a = jax.lax.switch(self._slot_branch[j][partner], branches, keys[j], other_obs[j])
-            actions.append(jnp.asarray(a, jnp.int32))
+            acts = jnp.stack([jnp.asarray(b(keys[j], other_obs[j]), jnp.int32) for b in branches])
+            actions.append(acts[self._slot_branch[j][partner]] if len(branches) > 1 else acts[0])
         return jnp.stack(actions)
 
     def subset(self, team_names: Sequence[str], name: str | None = None) -> Population:

@@ -1,4 +1,4 @@
-"""Heuristic Spread partners: landmark seekers, and the default population built from them.
+"""Heuristic Spread partners: landmark seekers, and the heuristic population built from them.
 
 Each heuristic reads the landmark offsets from its own observation (slots 4:10, landmark k at
 4+2k) and takes the one-axis step of :func:`~transam.partners.moves.move_toward` toward its
@@ -104,7 +104,7 @@ def heuristic_members() -> list[Member]:
 
 
 def heuristic_population(config: Config | None = None) -> Population:
-    """The default Spread population: the 13 heuristic teams of the module doc."""
+    """The heuristic Spread population (``partners="heuristic"``): the module doc's 13 teams."""
     del config  # the heuristics read observations only; no option changes them
     teams = [Team(f"{a}+{b}", (a, b)) for a, b in DEFAULT_TEAMS]
     return Population("spread-heuristic", heuristic_members(), teams)

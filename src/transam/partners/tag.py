@@ -143,6 +143,7 @@ def liam_population(
 
 
 def heuristic_population(config: Config | None = None) -> Population:
-    """The default Tag population: LIAM's table with heuristic stand-ins for learned slots."""
+    """The heuristic Tag population (``partners="heuristic"``): LIAM's table, stand-ins in its
+    learned slots."""
     del config  # the heuristics do not depend on the game settings
     return liam_population(name="tag-heuristic")

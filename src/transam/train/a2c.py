@@ -39,7 +39,7 @@ import optax
 from flax import struct
 
 from transam.envs.core import ControlledEnv, EnvState, PartnerRecord
-from transam.models.base import AgentModel, LocalStep
+from transam.models.base import AgentModel, LocalStep, PartnerView, PrivilegedModel
 from transam.models.policy import Policy
 from transam.train.config import TrainConfig
 
@@ -104,6 +104,7 @@ class Trajectory:
     done: jax.Array
     value: jax.Array  # critic output (normalised scale when normalize_returns)
     record: PartnerRecord  # training-only targets of the agent-model loss
+    partner: PartnerView | None  # the Oracle's execution-time partner input (None otherwise)
     finished_return: jax.Array  # return of the episode that ended at t (0 where none did)
     policy_carry0: Any
     model_carry0: Any
@@ -154,6 +155,23 @@ def batch_carry(carry: Any, n: int) -> Any:
     return jax.tree.map(lambda a: jnp.broadcast_to(a, (n, *jnp.shape(a))), carry)
 
 
+def partner_view(model: AgentModel, env_state: EnvState) -> PartnerView | None:
+    """The other agents' data at the current step, for a privileged model (Oracle) only."""
+    if not model.privileged:
+        return None
+    return PartnerView(env_state.other_obs, env_state.other_prev_actions)
+
+
+def model_step(
+    model: AgentModel, params: Any, carry: Any, x: LocalStep, partner: PartnerView | None
+) -> tuple[Any, jax.Array]:
+    """``model.step`` on a batch; only a privileged model is handed the partner view."""
+    if partner is None:
+        return jax.vmap(model.step, in_axes=(None, 0, 0))(params, carry, x)
+    oracle: PrivilegedModel = model  # type: ignore[assignment]
+    return jax.vmap(oracle.step, in_axes=(None, 0, 0, 0))(params, carry, x, partner)
+
+
 def act(
     policy: Policy,
     model: AgentModel,
@@ -162,9 +180,12 @@ def act(
     policy_carry: Any,
     model_carry: Any,
     x: LocalStep,
+    env_state: EnvState,
 ) -> tuple[Any, Any, jax.Array, jax.Array, jax.Array]:
-    """Execution path on a batch: (policy carry, model carry, z, logits, value)."""
-    model_carry, z = jax.vmap(model.step, in_axes=(None, 0, 0))(model_params, model_carry, x)
+    """Execution path on a batch (``x`` is what the agent knows in ``env_state``): (policy
+    carry, model carry, z, logits, value)."""
+    partner = partner_view(model, env_state)
+    model_carry, z = model_step(model, model_params, model_carry, x, partner)
     policy_carry, logits, value = policy.step(policy_params, policy_carry, x.obs, z, x.first)
     return policy_carry, model_carry, z, logits, value
 
@@ -227,21 +248,22 @@ def make_rollout(
         def body(carry: tuple[Any, ...], key: jax.Array) -> tuple[tuple[Any, ...], Any]:
             env_state, x, pc, mc, ep_ret = carry
             k_act, k_env = jax.random.split(key)
+            partner = partner_view(model, env_state)
             pc, mc, z, logits, value = act(
-                policy, model, rs.policy_params, rs.model_params, pc, mc, x
+                policy, model, rs.policy_params, rs.model_params, pc, mc, x, env_state
             )
             action = jax.random.categorical(k_act, logits).astype(jnp.int32)
             env_state, ts, x_next = env_step(env, k_env, env_state, action)
             ep_ret = ep_ret + ts.reward
             finished = jnp.where(ts.done, ep_ret, 0.0)
             ep_ret = jnp.where(ts.done, 0.0, ep_ret)
-            out = (x, z, action, ts.reward, ts.done, value, ts.record, finished)
+            out = (x, z, action, ts.reward, ts.done, value, ts.record, partner, finished)
             return (env_state, x_next, pc, mc, ep_ret), out
 
         init = (rs.env_state, rs.x, rs.policy_carry, rs.model_carry, rs.ep_return)
         keys = jax.random.split(key, config.a2c.n_steps)
         (env_state, x, pc, mc, ep_ret), outs = jax.lax.scan(body, init, keys)
-        x_seq, z, action, reward, done, value, record, finished = outs
+        x_seq, z, action, reward, done, value, record, partner, finished = outs
         traj = Trajectory(
             x=x_seq,
             z=z,
@@ -250,6 +272,7 @@ def make_rollout(
             done=done,
             value=value,
             record=record,
+            partner=partner,
             finished_return=finished,
             policy_carry0=rs.policy_carry,
             model_carry0=rs.model_carry,
@@ -325,13 +348,19 @@ def make_update(
     policy = make_policy(config, env)
     policy_tx, model_tx = make_optimizers(config)
     rollout = make_rollout(config, env, model)
-    n = a.num_envs
 
     def update(rs: RunnerState) -> tuple[RunnerState, Metrics]:
         key, k_roll, k_loss = jax.random.split(jax.random.wrap_key_data(rs.key), 3)
         rs, traj = rollout(rs, k_roll)
         _, _, _, _, last_value = act(
-            policy, model, rs.policy_params, rs.model_params, rs.policy_carry, rs.model_carry, rs.x
+            policy,
+            model,
+            rs.policy_params,
+            rs.model_params,
+            rs.policy_carry,
+            rs.model_carry,
+            rs.x,
+            rs.env_state,
         )
         stat = rs.ret_stat
         if a.normalize_returns:
@@ -352,7 +381,12 @@ def make_update(
             adv = (adv - adv.mean()) / (adv.std() + 1e-8)
 
         def loss_fn(policy_params: Any, model_params: Any) -> tuple[jax.Array, Metrics]:
-            if a.backprop_encoder:
+            if a.backprop_encoder and traj.partner is not None:
+                oracle: PrivilegedModel = model  # type: ignore[assignment]
+                z = jax.vmap(oracle.embed_rollout, in_axes=(None, 0, 1, 1), out_axes=1)(
+                    model_params, traj.model_carry0, traj.x, traj.partner
+                )
+            elif a.backprop_encoder:
                 z = jax.vmap(model.embed_rollout, in_axes=(None, 0, 1), out_axes=1)(
                     model_params, traj.model_carry0, traj.x
                 )
@@ -364,17 +398,13 @@ def make_update(
                 + a.vf_coef * terms["value_loss"]
                 - a.ent_coef * terms["entropy"]
             )
-            am, am_metrics = jax.vmap(model.loss, in_axes=(None, 0, 1, 1, 0))(
-                model_params,
-                traj.model_carry0,
-                traj.x,
-                traj.record,
-                jax.random.split(k_loss, n),
+            am, am_metrics = model.loss(
+                model_params, traj.model_carry0, traj.x, traj.record, k_loss
             )
             metrics = dict(terms)
-            metrics["model_loss"] = am.mean()
-            metrics.update({f"model/{k}": v.mean() for k, v in am_metrics.items()})
-            return a2c + am.mean(), metrics
+            metrics["model_loss"] = am
+            metrics.update({f"model/{k}": v for k, v in am_metrics.items()})
+            return a2c + am, metrics
 
         grad_fn = jax.grad(loss_fn, argnums=(0, 1), has_aux=True)
         (g_policy, g_model), metrics = grad_fn(rs.policy_params, rs.model_params)

@@ -12,12 +12,22 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from transam.envs import ENV_NAMES, EnvError
-from transam.models import METHOD_NAMES
-from transam.models.transam import TransAMConfig
+from transam.envs import ENV_NAMES, PARTNER_CHOICES, EnvError, PartnerChoice
+from transam.models import METHOD_NAMES, BaselineConfig, TransAMConfig
 
 EnvName = Literal["tag", "spread", "overcooked", "lbf"]
-MethodName = Literal["transam", "nam"]
+MethodName = Literal[
+    "transam",
+    "nam",
+    "oracle",
+    "liam",
+    "carl",
+    "cail",
+    "pel",
+    "transam-fuse",
+    "transam-pool",
+    "transam-im",
+]
 SeedMode = Literal["vmap", "sequential"]
 
 
@@ -87,6 +97,8 @@ class TrainConfig:
     """environment"""
     method: MethodName = "transam"
     """agent-modeling method"""
+    partners: PartnerChoice = "default"
+    """partner population: the shipped learned one, its held-out split, or the scripted one"""
     total_steps: int = 10_000_000
     """controlled-agent environment steps, summed over parallel envs (rounded up to whole
     updates)"""
@@ -112,7 +124,9 @@ class TrainConfig:
     a2c: A2CConfig = field(default_factory=A2CConfig)
     """A2C settings"""
     model: TransAMConfig = field(default_factory=TransAMConfig)
-    """TransAM encoder settings (ignored by other methods)"""
+    """transformer encoder settings (TransAM, its ablations, PEL; ignored by other methods)"""
+    baseline: BaselineConfig = field(default_factory=BaselineConfig)
+    """recurrent-encoder and contrastive-loss settings of the baselines"""
     eval: EvalConfig = field(default_factory=EvalConfig)
     """evaluation settings"""
 
@@ -124,6 +138,7 @@ class TrainConfig:
         """Raise :class:`ConfigError` for the first bad value; return ``self`` when all is well."""
         _choice("env", self.env, ENV_NAMES)
         _choice("method", self.method, METHOD_NAMES)
+        _choice("partners", self.partners, PARTNER_CHOICES)
         _choice("seed_mode", self.seed_mode, ("vmap", "sequential"))
         _at_least("total_steps", self.total_steps, 1)
         _at_least("seed", self.seed, 0)
@@ -152,6 +167,15 @@ class TrainConfig:
             raise ConfigError(f"model.dropout must be in [0, 1), got {m.dropout!r}")
         _choice("model.norm", m.norm, ("post", "pre"))
         _choice("model.recon_at", m.recon_at, ("all", "last"))
+        _choice("model.tokens", m.tokens, ("separate", "fuse"))
+        _choice("model.pool", m.pool, ("last", "mean"))
+        _choice("model.decoder", m.decoder, ("reconstruct", "imitate"))
+        b = self.baseline
+        for name in ("hidden", "embed_dim", "decoder_hidden"):
+            _at_least(f"baseline.{name}", getattr(b, name), 1)
+        _positive("baseline.temperature", b.temperature)
+        _in_range("baseline.pel_alpha", b.pel_alpha, 0.0, math.inf)
+        _choice("baseline.carl_positives", b.carl_positives, ("episode", "partner"))
         _at_least("eval.every_episodes", self.eval.every_episodes, 1)
         _at_least("eval.episodes", self.eval.episodes, 1)
         return self

@@ -97,9 +97,9 @@ class RunResult:
 
 
 @functools.lru_cache(maxsize=8)
-def env_and_model(env: str, method: str, model_config: Any) -> tuple[ControlledEnv, AgentModel]:
-    e = envs.make(env)
-    return e, make_model(method, e.spec, model_config)
+def env_and_model(config: TrainConfig) -> tuple[ControlledEnv, AgentModel]:
+    e = envs.make(config.env, partners=config.partners)
+    return e, make_model(config.method, e.spec, config.model, config.baseline)
 
 
 def _program_key(config: TrainConfig) -> TrainConfig:
@@ -124,7 +124,6 @@ class Programs:
     init: Callable[[jax.Array], RunnerState]  # one seed
     chunks: dict[int, Callable[[RunnerState], tuple[RunnerState, dict[str, jax.Array]]]]
     evaluate: Callable[[Any, Any, jax.Array], dict[str, jax.Array]]
-    has_decoder: bool
 
 
 @functools.lru_cache(maxsize=8)
@@ -132,9 +131,7 @@ def programs(config: TrainConfig, sizes: tuple[int, ...], vmapped: bool) -> Prog
     """Jitted init (one seed), chunk (one per chunk size) and evaluation functions, the latter
     vmapped over a leading seed axis when ``vmapped``. Cached so repeated runs in one process
     compile once."""
-    from transam.train.evaluate import has_decoder
-
-    env, model = env_and_model(config.env, config.method, config.model)
+    env, model = env_and_model(config)
 
     def init(key: jax.Array) -> RunnerState:
         return init_runner(config, env, model, key)
@@ -148,13 +145,12 @@ def programs(config: TrainConfig, sizes: tuple[int, ...], vmapped: bool) -> Prog
         init=jax.jit(init),
         chunks={u: jax.jit(f) for u, f in chunks.items()},
         evaluate=jax.jit(evaluate),
-        has_decoder=has_decoder(model, env),
     )
 
 
 def run_programs(config: TrainConfig, vmapped: bool = False) -> Programs:
     """The compiled programs a run of ``config`` uses (shared with :func:`train`'s cache)."""
-    env, _ = env_and_model(config.env, config.method, config.model)
+    env, _ = env_and_model(config)
     chunks = make_plan(config, env.spec.episode_len).chunks
     return programs(_program_key(config), tuple(sorted(set(chunks))), vmapped)
 
@@ -221,6 +217,10 @@ def prepare_run_dir(config: TrainConfig) -> str:
     if out.exists() and not out.is_dir():
         raise RunDirError(f"--out {str(out)!r} exists and is not a directory")
     entries = {p.name for p in out.iterdir()} if out.exists() else set()
+    if not entries and config.resume and not config.force:
+        raise RunDirError(
+            f"--resume: no run in --out {str(out)!r} to continue; drop --resume to start one"
+        )
     if not entries:
         return "fresh"
     if "config.json" not in entries:
@@ -296,7 +296,8 @@ def make_record(
         if k not in ("episodes", "return_sum"):
             rec[f"train/{k.removeprefix('model/')}"] = _clean_float(v)
     for k in ("return", "return_std", "action_accuracy", "obs_mse"):
-        rec[f"eval/{k}"] = _clean_float(evaluation[k])
+        if k in evaluation:  # a method without a decoder has no accuracy / MSE: absent, not 0
+            rec[f"eval/{k}"] = _clean_float(evaluation[k])
     return rec
 
 
@@ -376,7 +377,7 @@ def train(config: TrainConfig, stop_after_chunks: int | None = None) -> RunResul
     """Run (or resume) training as ``config`` says. ``stop_after_chunks`` stops early, as a kill
     would, after that many chunks of this invocation (for tests)."""
     config.validate()
-    env_and_model(config.env, config.method, config.model)  # bad env/model: fail before writing
+    env_and_model(config)  # bad env/model: fail before writing
     action = prepare_run_dir(config)
     out = Path(config.run_dir)
     seeds = [config.seed + i for i in range(config.num_seeds)]
@@ -392,7 +393,7 @@ def train(config: TrainConfig, stop_after_chunks: int | None = None) -> RunResul
     for d in dirs:
         d.mkdir(parents=True, exist_ok=True)
 
-    env, _ = env_and_model(config.env, config.method, config.model)
+    env, _ = env_and_model(config)
     plan = make_plan(config, env.spec.episode_len)
     groups = [list(range(len(seeds)))]
     if config.seed_mode == "sequential" and len(seeds) > 1:
@@ -413,6 +414,18 @@ def train(config: TrainConfig, stop_after_chunks: int | None = None) -> RunResul
     if done:
         write_json(out / "final.json", {"seeds": finals})
     return RunResult(out, seeds, finals, finished=done)
+
+
+def uniform_policy_eval(config: TrainConfig, seed: int, chunk: int) -> dict[str, float]:
+    """What a uniformly random controlled agent scores on the evaluation episodes of chunk
+    ``chunk`` (0-based) of seed ``seed``: the run's own "random" reference (actor zeroed, so
+    all logits are equal; same partners, same starts)."""
+    progs = run_programs(config)
+    init_key, eval_key = jax.random.split(jax.random.key(seed))
+    state = progs.init(init_key)
+    params = jax.tree.map(jnp.zeros_like, state.policy_params)
+    out = progs.evaluate(params, state.model_params, jax.random.fold_in(eval_key, chunk))
+    return {k: float(v) for k, v in out.items() if not k.startswith("per_step/")}
 
 
 def _run_group(
