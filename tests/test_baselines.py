@@ -6,7 +6,6 @@ learning on Spread data (random controlled agent, tiny settings)."""
 from __future__ import annotations
 
 import dataclasses
-from functools import partial
 from typing import Any
 
 import jax
@@ -14,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 import pytest
+from local_data import random_rollout
 
 from transam import envs
 from transam.envs.core import ControlledEnv, PartnerRecord
@@ -23,7 +23,6 @@ from transam.models.cail import CAIL
 from transam.models.carl import CARL, episode_labels, top1_accuracy
 from transam.models.liam import LIAM
 from transam.models.recurrent import RecurrentModel
-from transam.train import a2c
 
 TINY = BaselineConfig(hidden=32, embed_dim=16, decoder_hidden=32)
 STEPS, ENVS = 30, 24  # Spread episodes are 25 steps: one boundary at 25 in every env
@@ -35,25 +34,10 @@ def env() -> ControlledEnv:
     return envs.make("spread", partners="heuristic")  # the data the thresholds were set on
 
 
-@partial(jax.jit, static_argnums=0)
-def random_rollout(env: ControlledEnv, key: jax.Array) -> tuple[LocalStep, PartnerRecord]:
-    """ENVS environments, STEPS steps of a uniformly random controlled agent, time-major."""
-    k_reset, k_run = jax.random.split(key)
-    state, obs = jax.vmap(env.reset)(jax.random.split(k_reset, ENVS))
-
-    def body(carry: Any, key: jax.Array) -> Any:
-        state, x = carry
-        k_act, k_env = jax.random.split(key)
-        action = jax.random.randint(k_act, (ENVS,), 0, env.spec.num_actions)
-        state, ts, x_next = a2c.env_step(env, k_env, state, action)
-        return (state, x_next), (x, ts.record)
-
-    return jax.lax.scan(body, (state, a2c.first_step(obs)), jax.random.split(k_run, STEPS))[1]
-
-
 @pytest.fixture(scope="module")
 def data(env: ControlledEnv) -> tuple[LocalStep, PartnerRecord]:
-    return jax.tree.map(np.asarray, random_rollout(env, jax.random.key(0)))
+    xs, _, rec = random_rollout(env, jax.random.key(0), ENVS, STEPS)
+    return jax.tree.map(np.asarray, (xs, rec))
 
 
 def zero_carry(model: RecurrentModel, n: int) -> Any:

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
-from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +22,7 @@ import numpy as np
 import optax
 import pytest
 from flax import serialization
+from local_data import random_rollout
 
 from transam import envs
 from transam.envs.core import ControlledEnv
@@ -47,26 +47,9 @@ def tiny(env: ControlledEnv, method: str) -> AgentModel:
     return make_model(method, env.spec, TINY_T, TINY_B)
 
 
-@partial(jax.jit, static_argnums=0)
-def random_rollout(env: ControlledEnv, key: jax.Array) -> tuple[LocalStep, PartnerView, Any]:
-    """ENVS environments, STEPS random steps: (LocalSteps, partner views, records), [T, N]."""
-    k_reset, k_run = jax.random.split(key)
-    state, obs = jax.vmap(env.reset)(jax.random.split(k_reset, ENVS))
-
-    def body(carry: Any, key: jax.Array) -> Any:
-        state, x = carry
-        k_act, k_env = jax.random.split(key)
-        action = jax.random.randint(k_act, (ENVS,), 0, env.spec.num_actions)
-        view = PartnerView(state.other_obs, state.other_prev_actions)
-        state, ts, x_next = a2c.env_step(env, k_env, state, action)
-        return (state, x_next), (x, view, ts.record)
-
-    return jax.lax.scan(body, (state, a2c.first_step(obs)), jax.random.split(k_run, STEPS))[1]
-
-
 @pytest.fixture(scope="module")
 def data(env: ControlledEnv) -> tuple[LocalStep, PartnerView, Any]:
-    return random_rollout(env, jax.random.key(0))
+    return random_rollout(env, jax.random.key(0), ENVS, STEPS)
 
 
 def _step_fn(model: AgentModel) -> Any:

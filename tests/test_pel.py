@@ -5,7 +5,6 @@ contrastive over partner labels. Checked against a slow reference, and that both
 from __future__ import annotations
 
 import dataclasses
-from functools import partial
 from typing import Any
 
 import jax
@@ -13,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 import pytest
+from local_data import random_rollout
 
 from transam import envs
 from transam.envs.core import ControlledEnv, PartnerRecord
@@ -20,7 +20,6 @@ from transam.models import BaselineConfig, TransAMConfig, make_model
 from transam.models.base import LocalStep
 from transam.models.pel import PEL, paired_index
 from transam.models.transam import TransAM
-from transam.train import a2c
 
 TINY_T = TransAMConfig(context=3, width=16, layers=1, heads=2, ff_width=32, dropout=0.0)
 TINY_B = BaselineConfig(hidden=16, embed_dim=16, decoder_hidden=16, temperature=0.2)
@@ -32,27 +31,11 @@ def env() -> ControlledEnv:
     return envs.make("spread", partners="heuristic")  # the data the thresholds were set on
 
 
-@partial(jax.jit, static_argnums=0)
-def random_rollout(env: ControlledEnv, key: jax.Array) -> tuple[LocalStep, PartnerRecord]:
-    """ENVS environments (first episodes' partners 0,0,1,1,..,5,5), random actions, [T, N]."""
-    k_reset, k_run = jax.random.split(key)
-    partners = jnp.arange(ENVS) // 2
-    state, obs = jax.vmap(env.reset)(jax.random.split(k_reset, ENVS), partners)
-
-    def body(carry: Any, key: jax.Array) -> Any:
-        state, x = carry
-        k_act, k_env = jax.random.split(key)
-        action = jax.random.randint(k_act, (ENVS,), 0, env.spec.num_actions)
-        state, ts, x_next = a2c.env_step(env, k_env, state, action)
-        return (state, x_next), (x, ts.record)
-
-    return jax.lax.scan(body, (state, a2c.first_step(obs)), jax.random.split(k_run, STEPS))[1]
-
-
 @pytest.fixture(scope="module")
 def batch(env: ControlledEnv) -> tuple[Any, LocalStep, PartnerRecord]:
     """(carry before START [N], xs [T, N], records [T, N]) for the tiny PEL."""
-    xs, rec = random_rollout(env, jax.random.key(0))
+    # First episodes' partners 0,0,1,1,..,5,5: pairs of envs share a partner.
+    xs, _, rec = random_rollout(env, jax.random.key(0), ENVS, STEPS, jnp.arange(ENVS) // 2)
     model = tiny(env)
     push = model.encoder.push
 
