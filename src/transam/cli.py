@@ -14,13 +14,18 @@ from rich.console import Console
 from rich.table import Table
 
 from transam.envs import PartnerChoice
+from transam.evaluation import Evaluate
+from transam.models import METHOD_NAMES
 from transam.partners.cli import Partners
-from transam.train.config import ConfigError, TrainConfig
+from transam.report.build import Report
+from transam.train.config import ConfigError, MethodName, TrainConfig
 
 EnvName = Literal["tag", "spread", "overcooked", "lbf"]
 ALL_ENVS: tuple[EnvName, ...] = ("tag", "spread", "overcooked", "lbf")
+METHODS: tuple[MethodName, ...] = METHOD_NAMES  # type: ignore[assignment]
 
 console = Console()
+_ARGV: list[str] = []  # this invocation's arguments (recorded by `reproduce`)
 
 
 def _setup_jax() -> None:
@@ -232,6 +237,76 @@ class Demo(TrainConfig):
         )
 
 
+@dataclass(frozen=True)
+class Reproduce:
+    """Run the reproduction grid (env x method x seed) of a budget into --out, skipping finished
+    runs and resuming interrupted ones, evaluate every run on its training and held-out partners,
+    then build the report (figures, report.md, results.json) in --out/report/."""
+
+    budget: Literal["smoke", "small", "paper"] = "small"
+    """smoke: minutes (a test); small: a few hours on 2 CPU cores; paper: 10M steps x 5 seeds"""
+    out: str = "runs/reproduce"
+    """grid directory (one budget per directory)"""
+    envs: tuple[EnvName, ...] = ALL_ENVS
+    """environments"""
+    methods: tuple[MethodName, ...] = METHODS
+    """methods"""
+    seeds: tuple[int, ...] = ()
+    """seeds (default: 0 .. the budget's seed count - 1)"""
+    jobs: int = 2
+    """local backend: runs at a time, one process each (one training program does not keep two
+    CPU cores busy)"""
+    backend: Literal["local", "ray"] = "local"
+    """local processes, or tasks on a Ray cluster (pip install 'transam[ray]')"""
+    address: str = "auto"
+    """Ray: the cluster to join ('auto', HOST:PORT, or 'local' to start one here)"""
+    cpus_per_run: float = 1.0
+    """Ray: CPUs reserved per run"""
+    gpus_per_run: float = 0.0
+    """Ray: GPUs reserved per run (fractions share a GPU)"""
+    max_retries: int = 3
+    """Ray: retries of a run whose worker or node died (it resumes from its checkpoint)"""
+
+    def run(self) -> None:
+        from pathlib import Path
+
+        from transam import grid
+        from transam.report.build import build_report
+
+        _check_positive(jobs=self.jobs)
+        budget = grid.BUDGETS[self.budget]
+        seeds = self.seeds or tuple(range(budget.seeds))
+        specs = grid.grid_specs(self.envs, self.methods, seeds)
+        out = Path(self.out)
+        grid.open_grid(out, self.budget, specs, ["transam", *_ARGV])
+        console.print(
+            f"{len(specs)} runs ({len(self.envs)} envs x {len(self.methods)} methods x "
+            f"{len(seeds)} seeds), budget {self.budget!r} "
+            f"({budget.total_steps:,} steps each) into {out}/ via {self.backend}"
+        )
+        if self.backend == "ray":
+            from transam.grid_ray import run_ray
+
+            failures = run_ray(
+                out,
+                specs,
+                budget,
+                address=None if self.address == "local" else self.address,
+                cpus_per_run=self.cpus_per_run,
+                gpus_per_run=self.gpus_per_run,
+                max_retries=self.max_retries,
+            )
+        else:
+            failures = grid.run_local(out, specs, budget, jobs=self.jobs)
+        grid.close_grid(out, failures)
+        report = build_report(out)
+        for f in failures:
+            console.print(f"[red]failed[/red] {f}")
+        console.print(f"report: {report}")
+        if failures:
+            raise SystemExit(1)
+
+
 def _run_train(config: TrainConfig) -> bool:
     """Train and print the final evaluation table; True when the run finished."""
     from transam.train.loop import train
@@ -269,16 +344,20 @@ Command = (
     Annotated[Demo, tyro.conf.subcommand("demo")]
     | Annotated[Envs, tyro.conf.subcommand("envs")]
     | Annotated[Train, tyro.conf.subcommand("train")]
+    | Annotated[Evaluate, tyro.conf.subcommand("evaluate")]
+    | Annotated[Reproduce, tyro.conf.subcommand("reproduce")]
+    | Annotated[Report, tyro.conf.subcommand("report")]
     | Annotated[Partners, tyro.conf.subcommand("partners")]
 )
 
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``transam`` console script."""
+    _ARGV[:] = sys.argv[1:] if argv is None else argv
     cmd = tyro.cli(
         Command,
         prog="transam",
-        args=sys.argv[1:] if argv is None else argv,
+        args=_ARGV,
         config=(tyro.conf.OmitSubcommandPrefixes,),
         description="TransAM: transformer-based agent modeling for multi-agent RL (JAX).",
     )

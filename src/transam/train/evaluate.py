@@ -1,8 +1,10 @@
-"""Evaluation: N episodes in parallel, one per environment copy, partners drawn uniformly.
+"""Evaluation: N episodes in parallel, one per environment copy.
 
 Each copy plays exactly one episode (``episode_len`` steps; steps after an early termination
 are masked out). Actions are sampled from the policy by default: A2C trains a stochastic policy
 and the reference code evaluates it as it acts; ``greedy=True`` takes the argmax instead.
+Partners are drawn uniformly during training (as the training episodes draw them); the final
+evaluation (:mod:`transam.evaluation`) passes one partner index per episode instead.
 
 For a model with a decoder, every step also scores ``decode(z_t, o^{-1}_t)`` against the step's
 training-only :class:`PartnerRecord`: other-agent action accuracy (argmax of the logits,
@@ -10,6 +12,10 @@ averaged over agents and steps) where it predicts actions, and the MSE of the pr
 other-agent observation (averaged over its entries and the steps) where it reconstructs them;
 a metric the model does not predict is absent. Per-step curves over the in-episode time are
 returned too (``per_step/...``) for later reports.
+
+:func:`make_episodes` is the one rollout both use: it returns the per-step arrays (reward, live
+mask, scores, embeddings z, partner ids), and :func:`make_evaluate` reduces them to the
+training-time summary inside jit, where XLA drops the outputs the summary does not use (z).
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+from flax import struct
 
 from transam.envs.core import ControlledEnv
 from transam.models.base import AgentModel
@@ -28,20 +35,38 @@ from transam.train.config import TrainConfig
 EvalFn = Callable[[Any, Any, jax.Array], dict[str, jax.Array]]
 
 
-def make_evaluate(config: TrainConfig, env: ControlledEnv, model: AgentModel) -> EvalFn:
-    """A jitted ``(policy_params, model_params, key) -> metrics`` over ``config.eval.episodes``
-    episodes. Metrics: ``return`` (mean), ``return_std`` and, with a decoder,
-    ``action_accuracy`` and ``obs_mse`` where the model predicts them."""
-    n = config.eval.episodes
+@struct.dataclass
+class Episodes:
+    """Per-step arrays of N evaluation episodes, time-major ([T, N, ...])."""
+
+    reward: jax.Array  # [T, N] controlled-agent reward, 0 after the episode ended
+    live: jax.Array  # [T, N] float: 1 while the episode runs (step t belongs to it)
+    z: jax.Array  # [T, N, embed_dim] the embedding the policy acted on at t
+    partner: jax.Array  # [N] int32 partner index of each episode
+    scores: dict[str, jax.Array]  # [T, N] action_accuracy / obs_mse where predicted, 0 when dead
+
+
+EpisodesFn = Callable[[Any, Any, jax.Array, jax.Array | None], Episodes]
+
+
+def make_episodes(config: TrainConfig, env: ControlledEnv, model: AgentModel, n: int) -> EpisodesFn:
+    """``(policy_params, model_params, key, partner) -> Episodes`` of ``n`` episodes (pure; not
+    jitted). ``partner`` ([n] int32) fixes each episode's partner; None draws them uniformly."""
     length = env.spec.episode_len
     policy = make_policy(config, env)
     greedy = config.eval.greedy
 
-    def evaluate(policy_params: Any, model_params: Any, key: jax.Array) -> dict[str, jax.Array]:
+    def episodes(
+        policy_params: Any, model_params: Any, key: jax.Array, partner: jax.Array | None = None
+    ) -> Episodes:
         k_reset, k_run = jax.random.split(key)
-        env_state, obs = jax.vmap(env.reset)(jax.random.split(k_reset, n))
+        reset_keys = jax.random.split(k_reset, n)
+        if partner is None:
+            state0, obs = jax.vmap(env.reset)(reset_keys)
+        else:
+            state0, obs = jax.vmap(env.reset)(reset_keys, jnp.asarray(partner, jnp.int32))
         init = (
-            env_state,
+            state0,
             first_step(obs),
             policy.init_carry((n,)),
             batch_carry(model.init_carry(env.spec), n),
@@ -71,14 +96,28 @@ def make_evaluate(config: TrainConfig, env: ControlledEnv, model: AgentModel) ->
             if obs_pred is not None:
                 err = (obs_pred - rec.other_obs.reshape(n, -1)) ** 2
                 scores["obs_mse"] = err.mean(-1) * live
-            return (env_state, x, pc, mc, alive & ~ts.done), (ts.reward * live, live, scores)
+            out = (ts.reward * live, live, z, scores)
+            return (env_state, x, pc, mc, alive & ~ts.done), out
 
-        _, (reward, live, scores) = jax.lax.scan(body, init, jax.random.split(k_run, length))
-        returns = reward.sum(0)
-        per_t = jnp.maximum(live.sum(1), 1.0)
+        _, (reward, live, z, scores) = jax.lax.scan(body, init, jax.random.split(k_run, length))
+        return Episodes(reward=reward, live=live, z=z, partner=state0.partner, scores=scores)
+
+    return episodes
+
+
+def make_evaluate(config: TrainConfig, env: ControlledEnv, model: AgentModel) -> EvalFn:
+    """A jitted ``(policy_params, model_params, key) -> metrics`` over ``config.eval.episodes``
+    episodes (partners drawn uniformly). Metrics: ``return`` (mean), ``return_std`` and, with
+    a decoder, ``action_accuracy`` and ``obs_mse`` where the model predicts them."""
+    episodes = make_episodes(config, env, model, config.eval.episodes)
+
+    def evaluate(policy_params: Any, model_params: Any, key: jax.Array) -> dict[str, jax.Array]:
+        ep = episodes(policy_params, model_params, key, None)
+        returns = ep.reward.sum(0)
+        per_t = jnp.maximum(ep.live.sum(1), 1.0)
         out = {"return": returns.mean(), "return_std": returns.std()}
-        for k, v in scores.items():
-            out[k] = v.sum() / live.sum()
+        for k, v in ep.scores.items():
+            out[k] = v.sum() / ep.live.sum()
             out[f"per_step/{k}"] = v.sum(1) / per_t
         return out
 

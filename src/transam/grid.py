@@ -1,0 +1,273 @@
+"""The reproduction grid: every (environment, method, seed) run of a budget, each an ordinary
+``transam train`` run directory, followed by its final evaluations.
+
+Layout of ``--out`` (the same whichever backend ran the runs)::
+
+    grid.json                          the grid: budget, its settings, runs, invocations
+    runs/ENV/METHOD/seed_S/            one training run (config.json, metrics.jsonl, ...),
+        eval_train.json, eval_heldout.json   ... plus `transam evaluate` outputs
+    log/ENV_METHOD_seed_S.jsonl        one line per launch of that run (pid, host, start chunk)
+    report/                            `transam report` output
+
+:func:`run_one` is idempotent and is the whole unit of work a backend schedules: it skips a
+finished run, resumes an interrupted one from its last checkpoint, and evaluates what has not
+been evaluated. A backend therefore only has to call it (again, after a failure) for every run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import platform
+import socket
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from transam.envs import ENV_NAMES
+from transam.models import METHOD_NAMES
+from transam.train.config import ConfigError, EvalConfig, TrainConfig
+
+BudgetName = Literal["smoke", "small", "paper"]
+EVAL_PARTNERS: tuple[Literal["train", "heldout"], ...] = ("train", "heldout")
+
+# Controlled-agent steps per episode (envs.make(...).spec.episode_len), so a grid can be planned
+# without building environments; checked against the environments in the tests.
+EPISODE_LEN = {"tag": 50, "spread": 25, "overcooked": 400, "lbf": 50}
+
+
+@dataclass(frozen=True)
+class Budget:
+    """How long each run trains and how it is evaluated."""
+
+    total_steps: int
+    """controlled-agent steps per run, summed over parallel envs"""
+    seeds: int
+    """seeds per (env, method) when --seeds is not given"""
+    evals: int
+    """evaluation points during training (evenly spaced; also the checkpoint interval)"""
+    eval_episodes: int
+    """episodes per evaluation during training"""
+    final_episodes: int
+    """episodes of the final `transam evaluate` (training and held-out partners)"""
+
+
+BUDGETS: dict[str, Budget] = {
+    # Minutes: a test runs it end to end (every artefact, no learning expected).
+    "smoke": Budget(total_steps=1_000, seeds=2, evals=2, eval_episodes=8, final_episodes=16),
+    # What fits about an hour on a 2-core CPU for all 4 envs x 10 methods (docs/results/).
+    "small": Budget(total_steps=30_000, seeds=2, evals=6, eval_episodes=16, final_episodes=100),
+    # The paper: 10M steps, 5 seeds.
+    "paper": Budget(
+        total_steps=10_000_000, seeds=5, evals=100, eval_episodes=100, final_episodes=100
+    ),
+}
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One cell of the grid."""
+
+    env: str
+    method: str
+    seed: int
+
+    @property
+    def rel(self) -> str:
+        """The run directory, relative to the grid's --out."""
+        return f"runs/{self.env}/{self.method}/seed_{self.seed}"
+
+    @property
+    def name(self) -> str:
+        return f"{self.env}_{self.method}_seed_{self.seed}"
+
+
+def grid_specs(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int]) -> list[RunSpec]:
+    """The runs of a grid in a fixed order (env, method, seed), after checking the names."""
+    for what, values, valid in (("env", envs, ENV_NAMES), ("method", methods, METHOD_NAMES)):
+        for v in values:
+            if v not in valid:
+                raise ConfigError(f"unknown {what} {v!r}; valid choices: {', '.join(valid)}")
+    if not envs or not methods or not seeds:
+        raise ConfigError("the grid is empty: give at least one env, method and seed")
+    if any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
+        raise ConfigError(f"seeds must be distinct integers >= 0, got {list(seeds)}")
+    return [RunSpec(e, m, s) for e in envs for m in methods for s in seeds]
+
+
+def run_config(spec: RunSpec, budget: Budget, out: str | Path) -> TrainConfig:
+    """The training configuration of one grid run: the reference settings plus the budget."""
+    every = max(1, round(budget.total_steps / (budget.evals * EPISODE_LEN[spec.env])))
+    return TrainConfig(
+        env=spec.env,  # type: ignore[arg-type]
+        method=spec.method,  # type: ignore[arg-type]
+        total_steps=budget.total_steps,
+        seed=spec.seed,
+        out=str(Path(out) / spec.rel),
+        progress=False,
+        eval=EvalConfig(every_episodes=every, episodes=budget.eval_episodes),
+    ).validate()
+
+
+def _log(out: Path, spec: RunSpec, event: dict[str, Any]) -> None:
+    """Append one launch event (a line is small: appends are atomic enough on a local or NFS
+    filesystem, and a torn line is skipped by readers)."""
+    path = out / "log" / f"{spec.name}.jsonl"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as f:
+        f.write(json.dumps(event) + "\n")
+
+
+def read_launches(out: str | Path, spec: RunSpec) -> list[dict[str, Any]]:
+    """The launch events of one run (see :func:`run_one`)."""
+    from transam.train.loop import read_metrics
+
+    return read_metrics(Path(out) / "log" / f"{spec.name}.jsonl")
+
+
+def run_one(out: str | Path, spec: RunSpec, budget: Budget) -> dict[str, Any]:
+    """Train (or resume, or skip) one grid run, then evaluate it on the training and held-out
+    partners where not done yet. Safe to call again after any failure; returns a summary."""
+    from transam.evaluation import evaluate_run, evaluation_path
+    from transam.train.loop import _checkpoints, train
+
+    out = Path(out)
+    config = run_config(spec, budget, out)
+    run_dir = Path(config.run_dir)
+    finished = (run_dir / "final.json").exists()
+    started = (run_dir / "config.json").exists()
+    start_chunk = max(_checkpoints(run_dir), default=-1) + 1 if started else 0
+    tic = time.time()
+    if not finished:
+        _log(
+            out,
+            spec,
+            {
+                "event": "train",
+                "pid": os.getpid(),
+                "host": socket.gethostname(),
+                "start_chunk": start_chunk,
+                "resume": started,
+                "time": tic,
+            },
+        )
+        result = train(dataclasses.replace(config, resume=started))
+        if not result.finished:  # pragma: no cover (only a stop_after_chunks test stops early)
+            raise RuntimeError(f"{spec.name}: training stopped before the end")
+    evaluated = []
+    for partners in EVAL_PARTNERS:
+        if not evaluation_path(run_dir, partners).exists():
+            evaluate_run(run_dir, episodes=budget.final_episodes, partners=partners)
+            evaluated.append(partners)
+    if not finished or evaluated:
+        _log(out, spec, {"event": "done", "pid": os.getpid(), "seconds": time.time() - tic})
+    return {"run": spec.rel, "trained": not finished, "evaluated": evaluated}
+
+
+# ---------------------------------------------------------------- the grid file
+
+
+def machine() -> dict[str, Any]:
+    """What ran the grid (for the report's compute line)."""
+    import jax
+
+    return {
+        "host": socket.gethostname(),
+        "platform": platform.platform(),
+        "cpus": os.cpu_count(),
+        "jax_backend": jax.default_backend(),
+        "devices": [str(d) for d in jax.devices()],
+    }
+
+
+def open_grid(out: Path, budget_name: str, specs: list[RunSpec], argv: list[str]) -> dict[str, Any]:
+    """Create or extend ``grid.json``; a grid directory keeps one budget."""
+    if budget_name not in BUDGETS:
+        raise ConfigError(f"unknown budget {budget_name!r}; valid choices: {', '.join(BUDGETS)}")
+    from transam.train.loop import write_json
+
+    path = out / "grid.json"
+    if path.exists():
+        grid = json.loads(path.read_text())
+        if grid.get("budget") != budget_name:
+            raise ConfigError(
+                f"--out {str(out)!r} holds a {grid.get('budget')!r} grid; use another --out for "
+                f"budget {budget_name!r}"
+            )
+    elif out.exists() and any(out.iterdir()):
+        raise ConfigError(f"--out {str(out)!r} is not empty and holds no grid; choose another")
+    else:
+        grid = {
+            "budget": budget_name,
+            "budget_settings": dataclasses.asdict(BUDGETS[budget_name]),
+            "runs": [],
+            "invocations": [],
+        }
+    known = {r for r in grid["runs"]}
+    grid["runs"] += [s.rel for s in specs if s.rel not in known]
+    grid["invocations"].append(
+        {"argv": argv, "started": time.time(), "ended": None, "machine": machine()}
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(path, grid)
+    return grid
+
+
+def close_grid(out: Path, failures: list[str]) -> None:
+    """Stamp the end time (and failures) of this invocation into grid.json."""
+    from transam.train.loop import write_json
+
+    path = out / "grid.json"
+    grid = json.loads(path.read_text())
+    inv = grid["invocations"][-1]
+    inv["ended"] = time.time()
+    inv["wall_s"] = inv["ended"] - inv["started"]
+    inv["failures"] = failures
+    write_json(path, grid)
+
+
+def spec_from_rel(rel: str) -> RunSpec:
+    """Inverse of :attr:`RunSpec.rel`."""
+    _, env, method, seed = rel.split("/")
+    return RunSpec(env, method, int(seed.removeprefix("seed_")))
+
+
+# ---------------------------------------------------------------- backends
+
+Backend = Callable[[Path, list[RunSpec], Budget], list[str]]
+
+
+def _run_one_in_subprocess(args: tuple[str, RunSpec, Budget]) -> dict[str, Any]:
+    from transam.jaxcache import enable_compilation_cache
+
+    enable_compilation_cache()
+    return run_one(*args)
+
+
+def run_local(out: Path, specs: list[RunSpec], budget: Budget, jobs: int = 1) -> list[str]:
+    """Run the grid on this machine, ``jobs`` runs at a time (separate processes when > 1: one
+    XLA:CPU training program does not keep two cores busy). Returns the failed runs."""
+    failures: list[str] = []
+    if jobs <= 1:
+        for spec in specs:
+            try:
+                run_one(out, spec, budget)
+            except Exception as err:  # one bad run must not stop the grid
+                failures.append(f"{spec.rel}: {type(err).__name__}: {err}")
+        return failures
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
+        futures = {
+            spec: pool.submit(_run_one_in_subprocess, (str(out), spec, budget)) for spec in specs
+        }
+        for spec, fut in futures.items():
+            try:
+                fut.result()
+            except Exception as err:
+                failures.append(f"{spec.rel}: {type(err).__name__}: {err}")
+    return failures

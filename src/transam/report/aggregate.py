@@ -1,0 +1,218 @@
+"""Aggregation over seeds: one *cell* per (env, method) with per-seed values, mean, std across
+seeds and 95% bootstrap CI for every final metric, and mean + CI curves (during training and
+within the episode)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from transam.report.load import ENV_ORDER, METHOD_ORDER, Grid, RunData, order_key
+from transam.report.stats import curve_ci, interval, stratified_bootstrap
+
+FINAL_METRICS = (
+    "return",
+    "action_accuracy",
+    "obs_mse",
+    "heldout_return",
+    "probe_accuracy",
+    "trend:action_accuracy",
+    "trend:obs_mse",
+)
+CURVE_METRICS = ("return", "action_accuracy", "obs_mse")
+PER_STEP_METRICS = ("cum_return", "action_accuracy", "obs_mse")
+SOURCE_EVAL = "final evaluation"
+SOURCE_TRAIN = "last training evaluation"
+
+
+def _number(x: Any) -> float | None:
+    """A finite float from a number or a {"mean": ...} entry, else None."""
+    if isinstance(x, dict):
+        x = x.get("mean")
+    if isinstance(x, bool) or not isinstance(x, int | float):
+        return None
+    return float(x) if np.isfinite(x) else None
+
+
+def _series(x: Any) -> np.ndarray | None:
+    """A per-step list as floats (null -> NaN: no episode running at that step), or None."""
+    if not isinstance(x, list) or not x:
+        return None
+    try:
+        arr = np.array([np.nan if v is None else v for v in x], dtype=float)
+    except (TypeError, ValueError):
+        return None
+    arr[~np.isfinite(arr)] = np.nan
+    return arr if arr.ndim == 1 and np.isfinite(arr).any() else None
+
+
+def _trend(curve: np.ndarray) -> float | None:
+    """Mean of the last quarter of an episode's per-step curve minus that of the first (over
+    the steps with a value), or None with fewer than two."""
+    values = curve[np.isfinite(curve)]
+    if len(values) < 2:
+        return None
+    q = max(1, len(values) // 4)
+    return float(values[-q:].mean() - values[:q].mean())
+
+
+def run_finals(run: RunData) -> dict[str, tuple[float, str]]:
+    """The final metrics of a finished run: metric -> (value, source). The final evaluation
+    (eval_train.json) is preferred; the last training evaluation (final.json) stands in for a
+    run not evaluated yet."""
+    out: dict[str, tuple[float, str]] = {}
+    if run.status != "finished":
+        return out
+    ev, last = run.evals.get("train"), run.final or {}
+    for metric in ("return", "action_accuracy", "obs_mse"):
+        value = _number(ev.get(metric)) if ev else None
+        if value is not None:
+            out[metric] = (value, SOURCE_EVAL)
+        elif ev is None and (v := _number(last.get(f"eval/{metric}"))) is not None:
+            out[metric] = (v, SOURCE_TRAIN)
+    held = run.evals.get("heldout")
+    if held and (v := _number(held.get("return"))) is not None:
+        out["heldout_return"] = (v, SOURCE_EVAL)
+    probe = ev.get("probe") if ev else None
+    if isinstance(probe, dict) and (v := _number(probe.get("accuracy"))) is not None:
+        out["probe_accuracy"] = (v, SOURCE_EVAL)
+    per_step = (ev or {}).get("per_step") or {}
+    for metric in ("action_accuracy", "obs_mse"):
+        curve = _series(per_step.get(metric))
+        if curve is not None and (trend := _trend(curve)) is not None:
+            out[f"trend:{metric}"] = (trend, SOURCE_EVAL)
+    return out
+
+
+def stat(values: list[float], seeds: list[int]) -> dict[str, Any]:
+    """Mean, std across seeds (ddof 1; 0 for one seed), 95% bootstrap CI, and the values."""
+    ci = interval(values)
+    std = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
+    return {
+        "mean": ci.mean,
+        "std": std,
+        "lo": ci.lo,
+        "hi": ci.hi,
+        "n": ci.n,
+        "values": list(values),
+        "seeds": list(seeds),
+    }
+
+
+def _training_curve(runs: list[RunData], key: str) -> dict[str, Any] | None:
+    """Mean + CI of ``eval/<key>`` over seeds at each logged step (unfinished runs included)."""
+    series = []
+    for run in runs:
+        pts = {
+            int(r["step"]): v
+            for r in run.metrics
+            if isinstance(r.get("step"), int) and (v := _number(r.get(f"eval/{key}"))) is not None
+        }
+        if pts:
+            series.append(pts)
+    if not series:
+        return None
+    steps = sorted(set().union(*series))
+    matrix = np.array([[s.get(t, np.nan) for t in steps] for s in series], dtype=float)
+    return {"step": steps, **curve_ci(matrix)}
+
+
+def _episode_curve(curves: list[np.ndarray]) -> dict[str, Any]:
+    """Mean + CI over seeds of a per-timestep curve (cut to the shortest seed's length)."""
+    length = min(len(c) for c in curves)
+    matrix = np.stack([c[:length] for c in curves])
+    return {"t": list(range(length)), **curve_ci(matrix)}
+
+
+def cell(runs: list[RunData]) -> dict[str, Any]:
+    """Everything the report shows for one (env, method), from its runs."""
+    finished = [r for r in runs if r.status == "finished"]
+    out: dict[str, Any] = {
+        "seeds": [r.seed for r in finished],
+        "seeds_unfinished": [r.seed for r in runs if r.status == "unfinished"],
+        "seeds_missing": [r.seed for r in runs if r.status == "missing"],
+        "seeds_not_evaluated": [r.seed for r in finished if "train" not in r.evals],
+        "metrics": {},
+    }
+    finals = [(r.seed, run_finals(r)) for r in finished]
+    for metric in FINAL_METRICS:
+        have = [(seed, f[metric]) for seed, f in finals if metric in f]
+        if have:
+            values = [v for _, (v, _) in have]
+            out["metrics"][metric] = stat(values, [s for s, _ in have])
+            sources = sorted({src for _, (_, src) in have})
+            out["metrics"][metric]["source"] = sources[0] if len(sources) == 1 else "mixed"
+    stds = [
+        _number(r.evals["train"]["return"].get("std"))
+        if "train" in r.evals
+        else _number((r.final or {}).get("eval/return_std"))
+        for r in finished
+    ]
+    stds_ok = [s for s in stds if s is not None]
+    out["episode_return_std"] = float(np.mean(stds_ok)) if stds_ok else None
+    chances = [
+        _number(r.evals["train"]["probe"].get("chance"))
+        for r in finished
+        if isinstance(r.evals.get("train", {}).get("probe"), dict)
+    ]
+    chances_ok = [c for c in chances if c is not None]
+    out["probe_chance"] = float(np.mean(chances_ok)) if chances_ok else None
+    notes = [
+        r.evals["train"]["probe"]["note"]
+        for r in finished
+        if isinstance(r.evals.get("train", {}).get("probe"), dict)
+        and isinstance(r.evals["train"]["probe"].get("note"), str)
+    ]
+    out["probe_note"] = notes[0] if notes else None
+    out["curves"] = {
+        k: curve for k in CURVE_METRICS if (curve := _training_curve(runs, k)) is not None
+    }
+    evals = [r.evals["train"] for r in finished if "train" in r.evals]
+    series: dict[str, list[np.ndarray]] = {}
+    for ev in evals:
+        probe_info: dict[str, Any] = ev["probe"] if isinstance(ev.get("probe"), dict) else {}
+        lists = {**(ev.get("per_step") or {}), "probe_accuracy": probe_info.get("per_step")}
+        for metric in (*PER_STEP_METRICS, "probe_accuracy"):
+            if (arr := _series(lists.get(metric))) is not None:
+                series.setdefault(metric, []).append(arr)
+    out["per_step"] = {metric: _episode_curve(arrs) for metric, arrs in series.items()}
+    return out
+
+
+def cells(grid: Grid) -> dict[str, dict[str, dict[str, Any]]]:
+    """env -> method -> cell, in the paper's order."""
+    groups: dict[tuple[str, str], list[RunData]] = {}
+    for run in grid.runs:
+        groups.setdefault((run.env, run.method), []).append(run)
+    out: dict[str, dict[str, dict[str, Any]]] = {}
+    for (env, method), runs in groups.items():
+        out.setdefault(env, {})[method] = cell(runs)
+    envs, methods = order_key(ENV_ORDER), order_key(METHOD_ORDER)
+    return {e: {m: out[e][m] for m in sorted(out[e], key=methods)} for e in sorted(out, key=envs)}
+
+
+def aggregates(table: dict[str, dict[str, dict[str, Any]]]) -> dict[str, dict[str, Any]]:
+    """Per method, the mean over environments of its mean action / probe accuracy (both on a
+    0-1 scale; returns are not comparable across envs), with a stratified bootstrap CI (seeds
+    resampled within each env)."""
+    out: dict[str, dict[str, Any]] = {}
+    methods = sorted({m for env in table.values() for m in env}, key=order_key(METHOD_ORDER))
+    for metric in ("action_accuracy", "probe_accuracy"):
+        for method in methods:
+            strata = {
+                env: env_cells[method]["metrics"][metric]["values"]
+                for env, env_cells in table.items()
+                if metric in env_cells.get(method, {}).get("metrics", {})
+            }
+            if not strata:
+                continue
+            point, lo, hi = stratified_bootstrap(list(strata.values()))
+            out.setdefault(metric, {})[method] = {
+                "mean": float(point),
+                "lo": float(lo),
+                "hi": float(hi),
+                "envs": list(strata),
+                "seeds_per_env": [len(v) for v in strata.values()],
+            }
+    return out

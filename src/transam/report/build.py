@@ -1,0 +1,646 @@
+"""``transam report OUT``: aggregate a grid directory into OUT/report/.
+
+Writes ``results.json`` (every aggregated number and the claims), ``marl_eval.json`` (the raw
+data format of InstaDeep's marl-eval), ``figures/*.png`` (the paper's figures) and
+``report.md`` (commands, budget, compute, tables, figures, the paper's claims with computed
+verdicts). Works on a partial grid: what is missing is listed, never fatal.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import shlex
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import tyro
+
+from transam.report import aggregate, claims
+from transam.report.aggregate import SOURCE_EVAL
+from transam.report.load import METHOD_ORDER, Grid, display, load_grid
+from transam.report.stats import CONFIDENCE, RESAMPLES, RNG_SEED
+from transam.train.loop import write_atomic, write_json
+
+Table = dict[str, dict[str, dict[str, Any]]]
+
+CI_METHOD = " ".join(
+    (
+        f"{CONFIDENCE:.0%} percentile bootstrap over seeds: the seeds of each (env, method) are",
+        f"resampled with replacement {RESAMPLES:,} times (numpy RNG seed {RNG_SEED}), the mean",
+        "is recomputed for each resample, and the interval runs from the 2.5th to the 97.5th",
+        "percentile of those means. Where several environments enter one number (the",
+        "aggregates) the bootstrap is stratified: seeds are resampled within each environment,",
+        "as rliable does. rliable itself is not installable next to this stack, so this is a",
+        "numpy implementation of the same method (checked against scipy.stats.bootstrap in the",
+        "tests). A claim compares two methods with the bootstrap CI of the difference of their",
+        "means (each side's seeds resampled independently). With one seed the interval is the",
+        "point itself (marked n=1); with 2-3 seeds a bootstrap interval is crude (with 2 seeds",
+        "it is roughly the range of the two values, and it is narrower than a t-interval) and",
+        "claims resting on it are weak evidence either way.",
+    )
+)
+
+METRIC_TITLE = {
+    "return": "return",
+    "heldout_return": "return",
+    "action_accuracy": "action accuracy (%)",
+    "probe_accuracy": "probe accuracy (%)",
+    "obs_mse": "observation MSE",
+}
+PERCENT = ("action_accuracy", "probe_accuracy", "trend:action_accuracy")
+MARL_EVAL_NAMES = {
+    "tag": ("mpe", "simple_tag"),
+    "spread": ("mpe", "simple_spread"),
+    "overcooked": ("overcooked", "cramped_room"),
+    "lbf": ("lbf", "20x20-2p-4f"),
+}
+FIGURES = {
+    "returns": "returns_training.png",
+    "action_accuracy": "action_accuracy_training.png",
+    "episode": "transam_episode.png",
+    "probe": "probe_per_step.png",
+    "pca": "transam_pca.png",
+}
+
+
+# ---------------------------------------------------------------- formatting
+
+
+def fmt_value(metric: str, x: float | None) -> str:
+    if x is None:
+        return "—"
+    if metric in PERCENT:
+        return f"{100 * x:.1f}"
+    if "mse" in metric:
+        return f"{x:.4g}"
+    return f"{x:.2f}"
+
+
+def fmt_stat(metric: str, s: dict[str, Any], usual_n: int | None = None) -> str:
+    """``mean ± std [lo, hi]`` (std across seeds), plus ``(n=K)`` where K is not the usual
+    number of seeds or is 1, and † for a last-training-eval value. The single formatter of
+    every table cell (the tests compare it with results.json)."""
+    f = lambda x: fmt_value(metric, x)
+    text = f"{f(s['mean'])} ± {f(s['std'])} [{f(s['lo'])}, {f(s['hi'])}]"
+    if s["n"] != usual_n or s["n"] == 1:
+        text += f" (n={s['n']})"
+    if s.get("source", SOURCE_EVAL) != SOURCE_EVAL:
+        text += " †"
+    return text
+
+
+def _usual_n(table: Table) -> int | None:
+    ns = [
+        c["metrics"]["return"]["n"]
+        for env in table.values()
+        for c in env.values()
+        if "return" in c["metrics"]
+    ]
+    return Counter(ns).most_common(1)[0][0] if ns else None
+
+
+def _cell_text(table: Table, env: str, method: str, metric: str, usual_n: int | None) -> str:
+    c = table.get(env, {}).get(method)
+    if c is None or not c["seeds"]:
+        return "not run"
+    s = c["metrics"].get(metric)
+    return "—" if s is None else fmt_stat(metric, s, usual_n)
+
+
+def _md_table(header: list[str], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    return lines + ["| " + " | ".join(r) + " |" for r in rows]
+
+
+def metric_table(
+    table: Table, metric: str, usual_n: int | None, methods: list[str] | None = None
+) -> list[str]:
+    """Methods x environments for one final metric (only rows/columns with some value)."""
+    envs = [e for e in table if any(metric in c["metrics"] for c in table[e].values())]
+    if methods is None:
+        methods = _methods_with(table, metric)
+    if not envs or not methods:
+        return ["_No run has this metric yet._"]
+    rows = [
+        [f"**{display(m)}**", *(_cell_text(table, e, m, metric, usual_n) for e in envs)]
+        for m in methods
+    ]
+    return _md_table(["method", *envs], rows)
+
+
+def _methods_with(table: Table, metric: str) -> list[str]:
+    seen: list[str] = []
+    for env in table.values():
+        for m, c in env.items():
+            if metric in c["metrics"] and m not in seen:
+                seen.append(m)
+    order = METHOD_ORDER
+    return sorted(seen, key=lambda m: (order.index(m) if m in order else len(order), m))
+
+
+def _episode_std_table(table: Table) -> list[str]:
+    envs = [e for e in table if any(c["episode_return_std"] is not None for c in table[e].values())]
+    methods = _methods_with(table, "return")
+    if not envs:
+        return ["_No evaluation yet._"]
+    rows = []
+    for m in methods:
+        row = [f"**{display(m)}**"]
+        for e in envs:
+            std = table[e].get(m, {}).get("episode_return_std")
+            row.append("—" if std is None else f"{std:.2f}")
+        rows.append(row)
+    return _md_table(["method", *envs], rows)
+
+
+# ---------------------------------------------------------------- sections
+
+
+def _runs_summary(grid: Grid) -> dict[str, Any]:
+    by = lambda status: [r.rel for r in grid.runs if r.status == status]
+    finished = [r for r in grid.runs if r.status == "finished"]
+    return {
+        "expected": len(grid.expected),
+        "found": len(grid.runs),
+        "finished": by("finished"),
+        "unfinished": by("unfinished"),
+        "missing": by("missing"),
+        "not_evaluated_train": [r.rel for r in finished if "train" not in r.evals],
+        "not_evaluated_heldout": [r.rel for r in finished if "heldout" not in r.evals],
+        "not_in_grid_json": [r.rel for r in grid.runs if r.rel not in grid.expected],
+        "problems": {r.rel: r.problems for r in grid.runs if r.problems},
+    }
+
+
+def _compute(grid: Grid) -> dict[str, Any]:
+    invocations = [i for i in grid.info.get("invocations", []) if isinstance(i, dict)]
+    machines: list[dict[str, Any]] = []
+    for inv in invocations:
+        m = inv.get("machine")
+        if isinstance(m, dict) and m not in machines:
+            machines.append(m)
+    walls = [float(i["wall_s"]) for i in invocations if isinstance(i.get("wall_s"), int | float)]
+    return {
+        "commands": [shlex.join(str(a) for a in i["argv"]) for i in invocations if i.get("argv")],
+        "invocations": len(invocations),
+        "invocations_without_end": sum(1 for i in invocations if i.get("ended") is None),
+        "invocations_with_end": len(walls),
+        "wall_seconds": sum(walls),
+        "run_seconds_from_logs": grid.launch_seconds,
+        "failures": [f for i in invocations for f in (i.get("failures") or [])],
+        "machines": machines,
+    }
+
+
+def _hms(seconds: float) -> str:
+    s = round(seconds)
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
+
+
+def marl_eval(grid: Grid) -> dict[str, Any]:
+    """marl-eval's raw data: env -> task -> algorithm -> run -> step_k {step_count, return
+    [...]} and absolute_metrics. metrics.jsonl keeps the mean over an evaluation's episodes,
+    not every episode, so each list holds that one mean."""
+    data: dict[str, Any] = {}
+    for run in grid.runs:
+        if run.status == "missing":
+            continue
+        env_name, task = MARL_EVAL_NAMES.get(run.env, (run.env, run.env))
+        entry: dict[str, Any] = {}
+        k = 0
+        for rec in run.metrics:
+            ret = aggregate._number(rec.get("eval/return"))
+            if ret is None or not isinstance(rec.get("step"), int):
+                continue
+            step = {"step_count": rec["step"], "return": [ret]}
+            acc = aggregate._number(rec.get("eval/action_accuracy"))
+            if acc is not None:
+                step["action_accuracy"] = [acc]
+            entry[f"step_{k}"] = step
+            k += 1
+        finals = aggregate.run_finals(run)
+        if finals:
+            entry["absolute_metrics"] = {
+                m: [finals[m][0]]
+                for m in ("return", "action_accuracy", "heldout_return")
+                if m in finals
+            }
+        if entry:
+            algo = data.setdefault(env_name, {}).setdefault(task, {}).setdefault(run.method, {})
+            algo[f"run_{run.seed}"] = entry
+    return data
+
+
+def _claims_md(results: list[dict[str, Any]]) -> list[str]:
+    lines = [
+        "Each claim is checked per environment on the final evaluation (training partners), "
+        "with the bootstrap CI of the difference of means (signed so that > 0 favours the "
+        "claim's first method): **better** holds when the whole CI is > 0 and does not hold "
+        "when it is wholly < 0; **matches or exceeds** (`>=`) holds when the CI's low end is "
+        f"above -margin and does not hold when its high end is below -margin; **similar** (≈) "
+        f"holds when the CI lies within ±margin. The margin is {claims.MARGIN_FRACTION:.0%} of "
+        "the span of that environment's scores for that metric: from the lowest to the highest "
+        "of the methods' final means and their first evaluations during training (a "
+        "near-untrained reference). A check with "
+        f"fewer than {claims.MIN_SEEDS} seeds on a side is inconclusive; a method not run "
+        "makes it *not run*; a method without the metric (no decoder) drops the check. "
+        "Verdicts below are computed from results.json, not written by hand.",
+        "",
+        *_md_table(
+            ["#", "claim", "where", "verdict"],
+            [
+                [str(i + 1), f"`{c['key']}`", c["where"], f"**{c['verdict']}**"]
+                for i, c in enumerate(results)
+            ],
+        ),
+        "",
+    ]
+    for i, c in enumerate(results):
+        lines += [
+            f"### {i + 1}. `{c['key']}`: {c['verdict']}",
+            "",
+            f"> {c['claim']}",
+            "",
+            f"Where: {c['where']}. Rule: {c['rule']}."
+            + (f" Note: {c['note']}." if c["note"] else ""),
+            "",
+        ]
+        rows = []
+        for env, res in c["per_env"].items():
+            if not res["checks"]:
+                rows.append([env, "—", "", "", "", "", "", res["verdict"]])
+            for r in res["checks"]:
+                m = r["metric"]
+                if "diff" not in r:
+                    rows.append([env, r["check"], "", "", "", "", "", r["verdict"]])
+                    continue
+                n = f"{r['n_a']}" + (f" / {r['n_b']}" if r["n_b"] is not None else "")
+                ci = f"[{fmt_value(m, r['ci'][0])}, {fmt_value(m, r['ci'][1])}]"
+                verdict = r["verdict"] + (f" ({r['reason']})" if r.get("reason") else "")
+                rows.append(
+                    [
+                        env,
+                        r["check"],
+                        fmt_value(m, r["a_mean"]),
+                        fmt_value(m, r["b_mean"]),
+                        f"{fmt_value(m, r['diff'])} {ci}",
+                        "" if r["margin"] is None else fmt_value(m, r["margin"]),
+                        n,
+                        verdict,
+                    ]
+                )
+        lines += _md_table(
+            ["env", "check", "A", "B", "A vs B [95% CI]", "margin", "seeds", "verdict"], rows
+        )
+        env_line = ", ".join(f"{e}: {res['verdict']}" for e, res in c["per_env"].items())
+        lines += ["", f"Per environment: {env_line}.", ""]
+    lines += ["Claims not checked:", ""] + [f"- {t}" for t in claims.NOT_CHECKED] + [""]
+    return lines
+
+
+def render(results: dict[str, Any], table: Table) -> str:
+    """report.md from the aggregated results."""
+    grid, runs, comp = results["grid"], results["runs"], results["compute"]
+    usual_n = results["usual_seeds"]
+    lines = [
+        "# TransAM reproduction report",
+        "",
+        f"Generated {results['generated']} by `transam report` from `{grid['out']}`.",
+        "",
+        "## How this was run",
+        "",
+        f"Budget **{grid['budget']}**:",
+        "",
+        *_md_table(
+            ["setting", "value"],
+            [
+                [k, f"{v:,}" if isinstance(v, int) else str(v)]
+                for k, v in grid["budget_settings"].items()
+            ],
+        ),
+        "",
+        "Commands (one per invocation, from grid.json):",
+        "",
+        "```",
+        *(comp["commands"] or ["(grid.json records no command)"]),
+        "```",
+        "",
+        f"Compute: {comp['invocations']} invocation(s), wall time "
+        + (_hms(comp["wall_seconds"]) if comp["invocations_with_end"] else "unknown")
+        + " (h:mm:ss, summed over invocations"
+        + (
+            f"; {comp['invocations_without_end']} invocation(s) have no end time and are "
+            "not counted"
+            if comp["invocations_without_end"]
+            else ""
+        )
+        + f"); {_hms(comp['run_seconds_from_logs'])} summed over the runs' own launches "
+        "(log/*.jsonl, training + evaluation, overlapping when runs ran in parallel).",
+        "",
+    ]
+    for m in comp["machines"]:
+        parts = [
+            str(m["platform"]) if m.get("platform") else "",
+            f"{m['cpus']} CPUs" if m.get("cpus") else "",
+            f"JAX backend {m['jax_backend']}" if m.get("jax_backend") else "",
+            "devices " + ", ".join(map(str, m["devices"])) if m.get("devices") else "",
+        ]
+        lines.append(f"- Machine `{m.get('host', '?')}`: " + "; ".join(p for p in parts if p))
+    if comp["failures"]:
+        lines += ["", "Failures recorded by the grid:", ""]
+        lines += [f"- `{f}`" for f in comp["failures"]]
+    lines += [
+        "",
+        "## Runs",
+        "",
+        f"{runs['expected']} runs in grid.json; {len(runs['finished'])} finished, "
+        f"{len(runs['unfinished'])} unfinished, {len(runs['missing'])} missing; "
+        f"{len(runs['not_evaluated_train'])} finished run(s) without a final evaluation "
+        "(their numbers below are the last training evaluation, marked †).",
+        "",
+    ]
+    for key, what in (
+        ("missing", "Missing (not started)"),
+        ("unfinished", "Unfinished (learning curves only)"),
+        ("not_evaluated_train", "Not evaluated on training partners"),
+        ("not_evaluated_heldout", "Not evaluated on held-out partners"),
+        ("not_in_grid_json", "Found on disk but not in grid.json"),
+    ):
+        if runs[key]:
+            lines.append(f"- {what}: " + ", ".join(f"`{r}`" for r in runs[key]))
+    for rel, problems in runs["problems"].items():
+        lines.append(f"- Problems in `{rel}`: " + "; ".join(problems))
+    lines += [
+        "",
+        "## Statistics",
+        "",
+        CI_METHOD,
+        "",
+        "Cells read `mean ± std [95% CI]`: the mean over seeds of each seed's final evaluation "
+        "(mean over its evaluation episodes), the standard deviation across seeds (ddof 1), "
+        f"and the bootstrap CI of the mean. Every cell has n = {usual_n} seeds unless marked "
+        "(n=K); with n=1 the interval is the value itself and the std is 0 (no spread can be "
+        "estimated from one seed). † = the last evaluation during training (final.json) stands "
+        "in for a missing final evaluation for some or all of the cell's seeds.",
+        "",
+        "## Results",
+        "",
+        "### Final return (training partners)",
+        "",
+        *metric_table(table, "return", usual_n),
+        "",
+        "Spread of returns over evaluation episodes (the paper's “mean and standard deviation "
+        "over 100 evaluation episodes”): the standard deviation over one run's episodes, "
+        "averaged over seeds.",
+        "",
+        *_episode_std_table(table),
+        "",
+        "### Action reconstruction accuracy (%)",
+        "",
+        *metric_table(table, "action_accuracy", usual_n),
+        "",
+        "### Observation reconstruction MSE",
+        "",
+        *metric_table(table, "obs_mse", usual_n),
+        "",
+        "### Spread ablation (paper Table 1)",
+        "",
+    ]
+    ablation = ["transam", "transam-pool", "transam-fuse", "transam-im"]
+    spread = table.get("spread", {})
+    rows = [
+        [
+            f"**{display(m)}**",
+            _cell_text(table, "spread", m, "return", usual_n),
+            _cell_text(table, "spread", m, "action_accuracy", usual_n),
+        ]
+        for m in ablation
+    ]
+    if any(spread.get(m, {}).get("seeds") for m in ablation):
+        lines += _md_table(["method", "return", "action accuracy (%)"], rows)
+        lines += [
+            "",
+            "Paper: TransAM −48.76 / 85.72, -pool −49.37 / 61.67, -fuse −48.94 / "
+            "78.68, -im −49.93 / 72.08 (return / accuracy %).",
+        ]
+    else:
+        lines.append("_The Spread ablation was not run._")
+    lines += [
+        "",
+        "### Training vs held-out partners",
+        "",
+        "Return against the training population → return against the held-out population "
+        "(partners never seen in training), final evaluation.",
+        "",
+    ]
+    held_envs = [
+        e for e in table if any("heldout_return" in c["metrics"] for c in table[e].values())
+    ]
+    held_methods = _methods_with(table, "heldout_return")
+    if held_envs:
+        rows = []
+        for m in held_methods:
+            row = [f"**{display(m)}**"]
+            for e in held_envs:
+                c = table[e].get(m)
+                if c is None or "heldout_return" not in c["metrics"]:
+                    row.append("—" if c and c["seeds"] else "not run")
+                    continue
+                train = c["metrics"].get("return")
+                held = fmt_stat("heldout_return", c["metrics"]["heldout_return"], usual_n)
+                row.append(f"{fmt_value('return', train['mean']) if train else '—'} → {held}")
+            rows.append(row)
+        lines += _md_table(["method", *held_envs], rows)
+    else:
+        lines.append("_No held-out evaluation yet._")
+    lines += [
+        "",
+        "### Partner-identity probe (%)",
+        "",
+        "Accuracy of a linear probe predicting the partner team from the method's embedding "
+        "(held-out episodes of the final evaluation; this analysis is the reproduction's, not "
+        "the paper's).",
+        "",
+        *metric_table(table, "probe_accuracy", usual_n),
+    ]
+    chance = {
+        e: next(
+            (c["probe_chance"] for c in table[e].values() if c["probe_chance"] is not None), None
+        )
+        for e in table
+    }
+    if any(v is not None for v in chance.values()):
+        lines += [
+            "",
+            "Chance: "
+            + ", ".join(f"{e} {100 * v:.1f}" for e, v in chance.items() if v is not None)
+            + ".",
+        ]
+    probe_notes = {
+        m: c["probe_note"] for env in table.values() for m, c in env.items() if c["probe_note"]
+    }
+    for m, note in probe_notes.items():
+        lines += ["", f"{display(m)}: {note}."]
+    lines += ["", "### Aggregates over environments (stratified bootstrap)", ""]
+    agg = results["aggregates"]
+    if agg:
+        for metric, per_method in agg.items():
+            rows = [
+                [
+                    f"**{display(m)}**",
+                    f"{fmt_value(metric, a['mean'])} [{fmt_value(metric, a['lo'])}, "
+                    f"{fmt_value(metric, a['hi'])}]",
+                    ", ".join(
+                        f"{e} (n={n})" for e, n in zip(a["envs"], a["seeds_per_env"], strict=True)
+                    ),
+                ]
+                for m, a in per_method.items()
+            ]
+            lines += [f"Mean {METRIC_TITLE[metric]} over environments:", ""]
+            lines += [*_md_table(["method", "mean [95% CI]", "environments"], rows), ""]
+        lines.append(
+            "Returns are not aggregated across environments: their scales differ and there is "
+            "no agreed reference score to normalise them by."
+        )
+    else:
+        lines.append("_Nothing to aggregate yet._")
+    lines += ["", "## Figures", ""]
+    captions = {
+        "returns": "Evaluation return during training (mean over seeds, 95% CI band).",
+        "action_accuracy": "Other agents' action reconstruction accuracy during training.",
+        "episode": "TransAM across an episode (final evaluation): cumulative reward, action "
+        "accuracy, observation MSE per timestep; 95% CI over seeds.",
+        "probe": "Partner probe accuracy per timestep; dotted: chance.",
+        "pca": "TransAM embeddings, first two principal components, coloured by partner team.",
+    }
+    for key, rel in results["figures"].items():
+        lines += [f"![{captions[key]}]({rel})", "", f"*{captions[key]}*", ""]
+    missing_figs = [k for k in FIGURES if k not in results["figures"]]
+    if missing_figs:
+        lines += [f"Not drawn (no data yet): {', '.join(missing_figs)}.", ""]
+    lines += ["## Paper claims", "", *_claims_md(results["claims"])]
+    lines += [
+        "## Files",
+        "",
+        "- `results.json`: every number above (per-seed values, curves, claims).",
+        "- `marl_eval.json`: marl-eval raw-data format (env → task → algorithm → run → "
+        "step_k); each metric list holds the evaluation's episode mean, as per-episode values "
+        "are not logged during training.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------- entry point
+
+
+def build_report(out: Path, draw: bool = True) -> Path:
+    """Aggregate the grid in ``out`` into ``out/report/``; returns the path of report.md.
+    ``draw=False`` skips the figures (the slow part; for tests of the numbers)."""
+    from transam.report import figures  # matplotlib: imported only when a report is built
+
+    out = Path(out)
+    grid = load_grid(out)
+    table = aggregate.cells(grid)
+    report_dir = out / "report"
+    fig_dir = report_dir / "figures"
+    drawn: dict[str, str] = {}
+    plans = {
+        "returns": lambda p: figures.training_curves(
+            table, "return", "evaluation return", "Return during training", p
+        ),
+        "action_accuracy": lambda p: figures.training_curves(
+            table,
+            "action_accuracy",
+            "action accuracy",
+            "Action reconstruction accuracy during training",
+            p,
+        ),
+        "episode": lambda p: figures.episode_evolution(table, "transam", p),
+        "probe": lambda p: figures.probe_curves(table, p),
+        "pca": lambda p: figures.pca_scatter(grid.runs, "transam", p),
+    }
+    for key, plot in plans.items():
+        path = fig_dir / FIGURES[key]
+        if draw and plot(path) is not None:
+            drawn[key] = f"figures/{FIGURES[key]}"
+        else:
+            path.unlink(missing_ok=True)  # not drawn: no stale figure from an earlier build
+    results = {
+        "generated": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "grid": {
+            "out": str(out),
+            "budget": grid.info.get("budget", "unknown"),
+            "budget_settings": grid.info.get("budget_settings", {}),
+        },
+        "compute": _compute(grid),
+        "runs": _runs_summary(grid),
+        "statistics": {
+            "ci": "percentile bootstrap over seeds",
+            "confidence": CONFIDENCE,
+            "resamples": RESAMPLES,
+            "rng_seed": RNG_SEED,
+            "std": "across seeds, ddof 1",
+            "description": CI_METHOD,
+        },
+        "usual_seeds": _usual_n(table),
+        "cells": table,
+        "aggregates": aggregate.aggregates(table),
+        "claims": claims.evaluate_claims(table),
+        "figures": drawn,
+    }
+    report_dir.mkdir(parents=True, exist_ok=True)
+    write_json(report_dir / "results.json", results)
+    write_json(report_dir / "marl_eval.json", marl_eval(grid))
+    path = report_dir / "report.md"
+    write_atomic(path, render(results, table).encode())
+    return path
+
+
+@dataclass
+class Report:
+    """Aggregate a grid directory (the --out of `transam reproduce`) into OUT/report/: tables with
+    95% bootstrap CIs over seeds, the paper's figures, and its claims with computed verdicts."""
+
+    out: tyro.conf.Positional[Path]
+    """the grid directory (holds grid.json and runs/)"""
+
+    def run(self) -> None:
+        import json
+
+        from rich.console import Console
+        from rich.table import Table
+
+        console = Console()
+        path = build_report(self.out)
+        results = json.loads((path.parent / "results.json").read_text())
+        runs = results["runs"]
+        table = Table(title=f"final return, mean [95% CI] ({results['grid']['budget']} budget)")
+        for col in ("env", "method", "seeds", "return", "action acc."):
+            table.add_column(col, justify="left" if col in ("env", "method") else "right")
+        for env, cells in results["cells"].items():
+            for method, cell in cells.items():
+                ret, acc = cell["metrics"].get("return"), cell["metrics"].get("action_accuracy")
+                table.add_row(
+                    env,
+                    method,
+                    str(len(cell["seeds"])),
+                    f"{ret['mean']:.2f} [{ret['lo']:.2f}, {ret['hi']:.2f}]" if ret else "-",
+                    f"{100 * acc['mean']:.1f}%" if acc else "-",
+                )
+        console.print(table)
+        verdicts: dict[str, list[str]] = {}
+        for claim in results["claims"]:
+            verdicts.setdefault(claim["verdict"], []).append(claim["key"])
+        for verdict, keys in verdicts.items():
+            console.print(f"claims {verdict}: {', '.join(keys)}")
+        console.print(
+            f"runs: {len(runs['finished'])} finished, {len(runs['unfinished'])} unfinished, "
+            f"{len(runs['missing'])} missing (of {runs['expected']} in grid.json)"
+        )
+        console.print(f"report: {path}")
+        console.print(
+            f"results: {path.parent / 'results.json'}; figures: {path.parent / 'figures'}"
+        )

@@ -1,0 +1,195 @@
+"""Reading a grid directory (see :mod:`transam.grid`) without trusting it to be complete.
+
+Every file is optional: a run may be missing, unfinished (no final.json), or finished but not
+yet evaluated (no eval_*.json); a file being written by another process may be torn. Each run
+is read into a :class:`RunData` with a status and the problems met, and nothing here raises
+for a partial grid.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from transam.envs import ENV_NAMES
+from transam.models import METHOD_NAMES
+from transam.train.config import ConfigError
+from transam.train.loop import read_metrics
+
+# The paper's order.
+ENV_ORDER: tuple[str, ...] = ENV_NAMES
+METHOD_ORDER: tuple[str, ...] = METHOD_NAMES
+PARTNERS = ("train", "heldout")
+DISPLAY = {
+    "transam": "TransAM",
+    "nam": "NAM",
+    "oracle": "Oracle",
+    "liam": "LIAM",
+    "carl": "CARL",
+    "cail": "CAIL",
+    "pel": "PEL",
+    "transam-fuse": "TransAM-fuse",
+    "transam-pool": "TransAM-pool",
+    "transam-im": "TransAM-im",
+}
+
+
+def display(method: str) -> str:
+    """The paper's name of a method."""
+    return DISPLAY.get(method, method)
+
+
+Status = Literal["missing", "unfinished", "finished"]
+
+
+@dataclass(frozen=True)
+class Projection:
+    """An evaluation's 2-D PCA of the embeddings (eval_{partners}_pca.npz of
+    :mod:`transam.evaluation`)."""
+
+    coords: np.ndarray
+    """(N, 2)"""
+    partner: np.ndarray
+    """(N,) partner index of each episode"""
+    team_names: list[str] | None
+    explained_variance: list[float] | None
+
+
+@dataclass
+class RunData:
+    """What one run directory holds."""
+
+    env: str
+    method: str
+    seed: int
+    rel: str
+    status: Status = "missing"
+    metrics: list[dict[str, Any]] = field(default_factory=list)
+    final: dict[str, Any] | None = None
+    """the last metrics record, from final.json"""
+    evals: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """partners ("train" / "heldout") -> eval_{partners}.json"""
+    pca: dict[str, Projection] = field(default_factory=dict)
+    """partners -> eval_{partners}_pca.npz"""
+    problems: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Grid:
+    out: Path
+    info: dict[str, Any]
+    """grid.json ({} when absent)"""
+    runs: list[RunData]
+    expected: list[str]
+    """run dirs grid.json names (in its order)"""
+    launch_seconds: float
+    """sum of the per-run "done" seconds in log/*.jsonl"""
+
+
+def order_key(order: tuple[str, ...]) -> Any:
+    """Sort known names in the paper's order, unknown ones after them, alphabetically."""
+    return lambda name: (order.index(name) if name in order else len(order), name)
+
+
+def parse_rel(rel: str) -> tuple[str, str, int] | None:
+    """``runs/ENV/METHOD/seed_S`` -> (env, method, seed), or None for anything else."""
+    parts = rel.strip("/").split("/")
+    if len(parts) != 4 or parts[0] != "runs" or not parts[3].startswith("seed_"):
+        return None
+    try:
+        return parts[1], parts[2], int(parts[3].removeprefix("seed_"))
+    except ValueError:
+        return None
+
+
+def _read_json(path: Path, problems: list[str]) -> Any:
+    if not path.exists():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        problems.append(f"{path.name}: unreadable ({type(err).__name__})")
+        return None
+
+
+def read_pca(path: Path) -> Projection | None:
+    """The projection in ``path`` (keys ``coords``, ``partner``, optional ``team_names`` and
+    ``explained_variance``), or None when unreadable or shaped otherwise."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: np.asarray(data[k]) for k in data.files}
+    except (OSError, ValueError, KeyError):
+        return None
+    coords, partner = arrays.get("coords"), arrays.get("partner")
+    if coords is None or coords.ndim != 2 or coords.shape[1] < 2:
+        return None
+    n = coords.shape[0]
+    if partner is None or partner.shape != (n,):
+        partner = np.zeros(n, dtype=int)
+    teams = arrays.get("team_names")
+    ev = arrays.get("explained_variance")
+    return Projection(
+        coords[:, :2].astype(float),
+        partner,
+        [str(t) for t in teams.tolist()] if teams is not None and teams.ndim == 1 else None,
+        [float(v) for v in ev.tolist()] if ev is not None and ev.ndim == 1 else None,
+    )
+
+
+def read_run(out: Path, rel: str) -> RunData | None:
+    parsed = parse_rel(rel)
+    if parsed is None:
+        return None
+    env, method, seed = parsed
+    run = RunData(env, method, seed, rel)
+    d = out / rel
+    if not (d / "config.json").exists():
+        return run
+    run.status = "unfinished"
+    run.metrics = read_metrics(d / "metrics.jsonl")
+    final = _read_json(d / "final.json", run.problems)
+    if isinstance(final, dict) and final.get("seeds"):
+        run.status = "finished"
+        run.final = final["seeds"][0] or (run.metrics[-1] if run.metrics else None)
+    for partners in PARTNERS:
+        ev = _read_json(d / f"eval_{partners}.json", run.problems)
+        if isinstance(ev, dict) and isinstance(ev.get("return"), dict):
+            run.evals[partners] = ev
+        elif ev is not None:
+            run.problems.append(f"eval_{partners}.json: no 'return' entry")
+        npz = d / f"eval_{partners}_pca.npz"
+        if npz.exists():
+            pca = read_pca(npz)
+            if pca is None:
+                run.problems.append(f"{npz.name}: unreadable or without (N, 2) coords")
+            else:
+                run.pca[partners] = pca
+    return run
+
+
+def load_grid(out: Path) -> Grid:
+    """Every run grid.json names plus any run directory found under runs/ (sorted in the
+    paper's order). Raises only when ``out`` holds neither grid.json nor runs/."""
+    info = _read_json(out / "grid.json", []) if (out / "grid.json").exists() else None
+    if not isinstance(info, dict) and not (out / "runs").is_dir():
+        raise ConfigError(
+            f"{str(out)!r} holds no grid (neither grid.json nor runs/): pass the --out of "
+            "`transam reproduce`"
+        )
+    info = info if isinstance(info, dict) else {}
+    expected = [r for r in info.get("runs", []) if isinstance(r, str)]
+    found = [str(p.relative_to(out)) for p in sorted(out.glob("runs/*/*/seed_*")) if p.is_dir()]
+    rels = list(dict.fromkeys(expected + found))
+    runs = [r for r in (read_run(out, rel) for rel in rels) if r is not None]
+    envs, methods = order_key(ENV_ORDER), order_key(METHOD_ORDER)
+    runs.sort(key=lambda r: (envs(r.env), methods(r.method), r.seed))
+    seconds = 0.0
+    for log in sorted((out / "log").glob("*.jsonl")):
+        for event in read_metrics(log):
+            if event.get("event") == "done" and isinstance(event.get("seconds"), int | float):
+                seconds += float(event["seconds"])
+    return Grid(out, info, runs, expected, seconds)

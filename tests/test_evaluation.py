@@ -1,0 +1,229 @@
+"""``transam evaluate``: the final evaluation JSON, figure and projection of a run, the linear
+partner probe and the run-directory handling.
+
+One tiny LIAM run on Spread (scripted partners; a decoder and a recurrent embedding) is trained
+once for the module; NAM's run directory (no decoder, no embedding) is written directly from
+an initial runner state (jitted init: eager init takes longer than its compile).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+import pytest
+
+from transam import envs
+from transam.evaluation import (
+    Evaluate,
+    balanced_partners,
+    evaluate_run,
+    evaluation_path,
+    linear_probe,
+    load_run_config,
+    pca_2d,
+    population_for,
+    stratified_split,
+)
+from transam.train.config import ConfigError, EvalConfig, TrainConfig
+from transam.train.loop import _save_checkpoint, read_metrics, run_programs, train, write_json
+
+EPISODES = 26  # two per partner of Spread's 13 scripted teams; one size: one compile
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("liam")
+    cfg = TrainConfig(
+        env="spread",
+        method="liam",
+        partners="heuristic",
+        total_steps=500,  # 10 updates in 2 chunks of 5: checkpoints chunk 0 and 1
+        eval=EvalConfig(every_episodes=10, episodes=4),
+        progress=False,
+        out=str(out),
+    )
+    assert train(cfg).finished
+    return out
+
+
+@pytest.fixture(scope="module")
+def result(run_dir: Path) -> dict[str, Any]:
+    return evaluate_run(run_dir, episodes=EPISODES)
+
+
+# ------------------------------------------------------------------ probe, split, projection
+
+
+def test_probe_recovers_a_planted_partner_signal_and_not_noise() -> None:
+    rng = np.random.default_rng(0)
+    t, n, d, m = 3, 120, 16, 6
+    labels = balanced_partners(n, m)
+    noise = rng.normal(size=(t, n, d))
+    planted = noise * 0.2
+    planted[..., :m] += np.eye(m)[labels]
+    live = np.ones((t, n))
+    good = linear_probe(planted, live, labels, seed=0)
+    assert good["accuracy"] > 0.95 and len(good["per_step"]) == t
+    assert good["chance"] == pytest.approx(1 / m) and good["train_episodes"] == 60
+    bad = linear_probe(noise, live, labels, seed=0)
+    assert bad["accuracy"] < 0.35  # chance 1/6; 180 test predictions
+    # Dead episodes are left out; a step where every test episode is dead is not scored.
+    live[2, :] = 0.0
+    partial = linear_probe(planted, live, labels, seed=0)
+    assert partial["per_step"][2] is None
+    assert partial["accuracy"] == pytest.approx(np.mean(partial["per_step"][:2]))
+
+
+def test_stratified_split_halves_every_class_deterministically() -> None:
+    labels = np.array([0, 0, 0, 0, 1, 1, 1, 2, 2, 2, 2, 2, 2])
+    train, test = stratified_split(labels, seed=3)
+    assert set(train).isdisjoint(test) and len(train) + len(test) == len(labels)
+    for c in range(3):
+        assert abs((labels[train] == c).sum() - (labels[test] == c).sum()) <= 1
+    again = stratified_split(labels, seed=3)
+    assert np.array_equal(train, again[0]) and np.array_equal(test, again[1])
+
+
+def test_pca_finds_the_planted_plane() -> None:
+    rng = np.random.default_rng(1)
+    plane = rng.normal(size=(50, 2)) * [5.0, 2.0]
+    x = plane @ rng.normal(size=(2, 8)) + 0.01 * rng.normal(size=(50, 8))
+    coords, ratio = pca_2d(x)
+    assert coords.shape == (50, 2) and sum(ratio) > 0.999 and ratio[0] > ratio[1]
+
+
+def test_population_mapping() -> None:
+    assert population_for("default", "train") == "default"
+    assert population_for("default", "heldout") == "heldout"
+    assert population_for("heldout", "heldout") == "default"
+    assert population_for("heuristic", "heldout") == "heldout"
+    with pytest.raises(ConfigError, match="valid choices: train, heldout"):
+        population_for("default", "test")
+
+
+# ------------------------------------------------------------------ run directories
+
+
+def test_config_round_trip_and_multi_seed_dirs(run_dir: Path, tmp_path: Path) -> None:
+    saved = json.loads((run_dir / "config.json").read_text())
+    cfg = load_run_config(run_dir)
+    assert cfg.identity() == saved and cfg.out == str(run_dir)
+    hash(cfg)  # rebuilt nested dataclasses, tuples for lists: usable as a cache key
+
+    multi = tmp_path / "multi"
+    multi.mkdir()
+    write_json(multi / "config.json", {**saved, "seed": 3, "num_seeds": 2})
+    with pytest.raises(ConfigError, match=r"seed_3.*seed_4"):
+        load_run_config(multi)
+    (multi / "seed_4").mkdir()
+    one = load_run_config(multi / "seed_4")
+    assert (one.seed, one.num_seeds, one.out) == (4, 1, str(multi / "seed_4"))
+    with pytest.raises(ConfigError, match="its seeds: 3, 4"):
+        load_run_config(multi / "seed_7")
+    with pytest.raises(ConfigError, match=r"no config\.json"):
+        load_run_config(tmp_path)
+    write_json(multi / "config.json", {**saved, "colour": "red"})
+    with pytest.raises(ConfigError, match="unknown setting"):
+        load_run_config(multi)
+
+
+# ------------------------------------------------------------------ the evaluation of a run
+
+
+def test_result_schema_and_files(run_dir: Path, result: dict[str, Any]) -> None:
+    T = 25  # Spread's episode length
+    assert (result["env"], result["method"], result["seed"]) == ("spread", "liam", 0)
+    assert (result["partners"], result["population"]) == ("train", "heuristic")
+    assert result["checkpoint"] == "checkpoints/chunk_000001.msgpack"  # the newest
+    assert result["step"] == read_metrics(run_dir / "metrics.jsonl")[-1]["step"] == 500
+    assert result["episodes"] == EPISODES
+    assert np.isfinite(result["return"]["mean"]) and result["return"]["std"] > 0
+    assert 0.0 <= result["action_accuracy"] <= 1.0 and result["obs_mse"] > 0
+    per = result["per_step"]
+    assert {len(per[k]) for k in ("cum_return", "action_accuracy", "obs_mse")} == {T}
+    assert per["cum_return"][-1] == pytest.approx(result["return"]["mean"], rel=1e-9)
+    # Spread's rewards are negative every step: the cumulative reward falls.
+    assert all(b < a for a, b in zip(per["cum_return"], per["cum_return"][1:], strict=False))
+    teams = envs.make("spread", partners="heuristic").population.team_names
+    assert list(result["per_partner_return"]) == list(teams)  # balanced: every partner plays
+    probe = result["probe"]
+    assert 0.0 <= probe["accuracy"] <= 1.0 and len(probe["per_step"]) == T
+    assert probe["chance"] == pytest.approx(1 / 13)
+    assert probe["train_episodes"] == probe["test_episodes"] == 13
+    assert probe["features"] == "embedding z_t (dim 128)"
+    assert len(result["pca"]["explained_variance"]) == 2
+    assert result["notes"] == []
+
+    path = evaluation_path(run_dir, "train")
+    assert json.loads(path.read_text()) == result
+    assert path.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    pca = np.load(run_dir / "eval_train_pca.npz")
+    assert pca["coords"].shape == (EPISODES, 2)
+    assert np.array_equal(pca["partner"], balanced_partners(EPISODES, 13))
+    assert list(pca["team_names"]) == list(teams) and set(pca["t"]) == {T - 1}
+
+
+def test_same_seed_same_json_other_seed_other_episodes(
+    run_dir: Path, result: dict[str, Any], tmp_path: Path
+) -> None:
+    assert evaluate_run(run_dir, episodes=EPISODES) == result
+    shutil.copytree(run_dir, tmp_path / "run")  # keep the seed-0 files for the other tests
+    other = evaluate_run(tmp_path / "run", episodes=EPISODES, seed=1)
+    assert other["return"]["mean"] != result["return"]["mean"]
+
+
+def test_heldout_partners(run_dir: Path, result: dict[str, Any]) -> None:
+    held = evaluate_run(run_dir, episodes=EPISODES, partners="heldout")
+    assert (held["partners"], held["population"], held["trained_partners"]) == (
+        "heldout",
+        "heldout",
+        "heuristic",
+    )
+    assert held["population_name"] == "spread-heldout" and "heldout" in held["notes"][0]
+    teams = envs.make("spread", partners="heldout").population.team_names
+    assert list(held["per_partner_return"]) == list(teams)
+    assert evaluation_path(run_dir, "heldout").exists()
+    assert json.loads(evaluation_path(run_dir, "train").read_text()) == result  # untouched
+
+
+def test_named_checkpoint_and_bad_names(run_dir: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "run"
+    shutil.copytree(run_dir, copy)
+    first = evaluate_run(copy, episodes=EPISODES, checkpoint="chunk_000000.msgpack")
+    assert first["checkpoint"] == "checkpoints/chunk_000000.msgpack" and first["step"] == 250
+    assert evaluate_run(copy, episodes=EPISODES, checkpoint="0") == first
+    with pytest.raises(ConfigError, match=r"'7' not found.*chunk_000000.msgpack, chunk_000001"):
+        evaluate_run(copy, episodes=EPISODES, checkpoint="7")
+    with pytest.raises(ConfigError, match="episodes must be an integer >= 2"):
+        evaluate_run(copy, episodes=1)
+    with pytest.raises(ConfigError, match="unknown partners 'test'"):
+        evaluate_run(copy, partners="test")  # type: ignore[arg-type]
+    shutil.rmtree(copy / "checkpoints")
+    with pytest.raises(ConfigError, match="no checkpoints"):
+        evaluate_run(copy, episodes=EPISODES)
+
+
+def test_cli_prints_a_summary(
+    run_dir: Path, result: dict[str, Any], capsys: pytest.CaptureFixture[str]
+) -> None:
+    Evaluate(str(run_dir), episodes=EPISODES).run()
+    out = capsys.readouterr().out
+    assert "partner probe accuracy" in out and "eval_train.json" in out
+
+
+def test_nam_has_no_decoder_metrics_and_no_probe(tmp_path: Path) -> None:
+    cfg = TrainConfig(env="spread", method="nam", partners="heuristic", out=str(tmp_path))
+    write_json(tmp_path / "config.json", cfg.identity())
+    _save_checkpoint(tmp_path, 0, jax.device_get(run_programs(cfg).init(jax.random.key(0))))
+    res = evaluate_run(tmp_path, episodes=EPISODES)
+    for key in ("action_accuracy", "obs_mse", "probe", "pca"):
+        assert key not in res
+    assert set(res["per_step"]) == {"cum_return"} and res["step"] == 0
+    assert "not finished" in res["notes"][0] and "no learned embedding" in res["notes"][1]
+    assert not (tmp_path / "eval_train_pca.npz").exists()
+    assert (tmp_path / "eval_train.png").exists()

@@ -1,0 +1,71 @@
+"""The reproduction grid's planning and bookkeeping (no training here: see test_reproduce.py)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from transam import envs, grid
+from transam.train.config import ConfigError
+from transam.train.loop import make_plan
+
+
+@pytest.mark.parametrize("name", envs.ENV_NAMES)
+def test_episode_lengths_match_the_environments(name: str) -> None:
+    assert grid.EPISODE_LEN[name] == envs.make(name, partners="heuristic").spec.episode_len
+
+
+@pytest.mark.parametrize("budget", list(grid.BUDGETS))
+@pytest.mark.parametrize("name", envs.ENV_NAMES)
+def test_run_config_evaluates_about_budget_evals_times(budget: str, name: str) -> None:
+    b = grid.BUDGETS[budget]
+    config = grid.run_config(grid.RunSpec(name, "nam", 3), b, "somewhere")
+    plan = make_plan(config, grid.EPISODE_LEN[name])
+    assert config.seed == 3 and config.total_steps == b.total_steps
+    assert config.eval.episodes == b.eval_episodes
+    assert config.run_dir == f"somewhere/runs/{name}/nam/seed_3"
+    # evenly spaced evaluation points: the budget's count, give or take rounding
+    assert abs(len(plan.chunks) - b.evals) <= max(1, b.evals // 4)
+
+
+def test_grid_specs_order_and_errors() -> None:
+    specs = grid.grid_specs(["spread", "tag"], ["nam", "liam"], [0, 1])
+    assert [s.rel for s in specs[:3]] == [
+        "runs/spread/nam/seed_0",
+        "runs/spread/nam/seed_1",
+        "runs/spread/liam/seed_0",
+    ]
+    assert grid.spec_from_rel(specs[-1].rel) == specs[-1]
+    with pytest.raises(ConfigError, match=r"unknown env 'pong'.*tag, spread"):
+        grid.grid_specs(["pong"], ["nam"], [0])
+    with pytest.raises(ConfigError, match=r"unknown method 'lima'.*transam"):
+        grid.grid_specs(["tag"], ["lima"], [0])
+    with pytest.raises(ConfigError, match="distinct"):
+        grid.grid_specs(["tag"], ["nam"], [0, 0])
+    with pytest.raises(ConfigError, match="empty"):
+        grid.grid_specs(["tag"], [], [0])
+
+
+def test_grid_file_keeps_one_budget_and_never_adopts_a_foreign_directory(tmp_path) -> None:
+    out = tmp_path / "g"
+    specs = grid.grid_specs(["spread"], ["nam"], [0])
+    grid.open_grid(out, "smoke", specs, ["transam", "reproduce"])
+    more = grid.grid_specs(["spread"], ["nam", "liam"], [0])
+    grid.open_grid(out, "smoke", more, ["again"])  # extending the same budget is fine
+    grid.close_grid(out, ["x: failed"])
+    saved = json.loads((out / "grid.json").read_text())
+    assert saved["runs"] == ["runs/spread/nam/seed_0", "runs/spread/liam/seed_0"]
+    assert [i["argv"] for i in saved["invocations"]] == [["transam", "reproduce"], ["again"]]
+    assert saved["invocations"][-1]["failures"] == ["x: failed"]
+    assert saved["invocations"][-1]["wall_s"] >= 0
+    with pytest.raises(ConfigError, match=r"holds a 'smoke' grid"):
+        grid.open_grid(out, "small", specs, [])
+    with pytest.raises(ConfigError, match=r"unknown budget 'huge'.*smoke, small, paper"):
+        grid.open_grid(tmp_path / "h", "huge", specs, [])
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "precious.txt").write_text("keep")
+    with pytest.raises(ConfigError, match="not empty"):
+        grid.open_grid(other, "smoke", specs, [])
+    assert (other / "precious.txt").read_text() == "keep"

@@ -1,0 +1,84 @@
+"""`transam reproduce --budget smoke` end to end: the grid, its evaluations and the report; an
+interrupted run is resumed from its checkpoint and finished runs are never redone."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from transam import grid
+from transam.cli import main
+from transam.train.loop import read_metrics, train
+
+ENVS, METHODS, SEEDS = ["spread"], ["nam", "liam"], [0, 1]
+GRID = ["--envs", *ENVS, "--methods", *METHODS, "--seeds", *map(str, SEEDS)]
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("grid") / "smoke"
+    # An interrupted run: the first chunk is checkpointed, then the process "dies".
+    spec = grid.RunSpec("spread", "liam", 1)
+    config = grid.run_config(spec, grid.BUDGETS["smoke"], out)
+    out.mkdir()
+    grid.open_grid(out, "smoke", [spec], ["setup"])
+    assert not train(config, stop_after_chunks=1).finished
+    argv = ["reproduce", "--budget", "smoke", "--out", str(out), "--jobs", "1"]
+    main([*argv, *GRID])
+    return out
+
+
+def test_every_run_is_trained_and_evaluated(smoke: Path) -> None:
+    specs = grid.grid_specs(ENVS, METHODS, SEEDS)
+    for spec in specs:
+        run = smoke / spec.rel
+        assert (run / "final.json").exists()
+        chunks = [r["chunk"] for r in read_metrics(run / "metrics.jsonl")]
+        assert chunks == list(range(len(chunks))) and len(chunks) >= 2
+        for partners in grid.EVAL_PARTNERS:
+            ev = json.loads((run / f"eval_{partners}.json").read_text())
+            assert ev["episodes"] == grid.BUDGETS["smoke"].final_episodes
+            assert ("action_accuracy" in ev) == (spec.method == "liam")
+            assert (run / f"eval_{partners}.png").stat().st_size > 0
+    launches = grid.read_launches(smoke, grid.RunSpec("spread", "liam", 1))
+    trains = [e for e in launches if e["event"] == "train"]
+    assert [(e["resume"], e["start_chunk"]) for e in trains] == [(True, 1)]
+
+
+def test_report_has_every_artefact(smoke: Path) -> None:
+    report = smoke / "report"
+    text = (report / "report.md").read_text()
+    results = json.loads((report / "results.json").read_text())
+    assert "spread" in text and "liam" in text and "nam" in text
+    assert "reproduce --budget smoke" in text  # the exact command
+    figures = sorted(p.name for p in (report / "figures").glob("*.png"))
+    assert figures, "no figures"
+    for name in figures:
+        assert f"figures/{name}" in text, f"{name} is not linked from report.md"
+    assert results
+
+
+def test_rerun_redoes_nothing(smoke: Path) -> None:
+    before = {
+        p: p.read_bytes()
+        for p in smoke.rglob("*")
+        if p.is_file() and p.suffix in (".jsonl", ".msgpack") and "log" not in p.parts
+    }
+    launches = sum(len(grid.read_launches(smoke, s)) for s in grid.grid_specs(ENVS, METHODS, SEEDS))
+    main(["reproduce", "--budget", "smoke", "--out", str(smoke), "--jobs", "1", *GRID])
+    after = sum(len(grid.read_launches(smoke, s)) for s in grid.grid_specs(ENVS, METHODS, SEEDS))
+    assert after == launches
+    for p, data in before.items():
+        assert p.read_bytes() == data, f"{p} was rewritten"
+
+
+def test_bad_grid_arguments_fail_before_writing(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "g"
+    with pytest.raises(SystemExit):
+        main(["reproduce", "--budget", "smoke", "--out", str(out), "--methods", "lima"])
+    assert "lima" in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="distinct"):
+        main(["reproduce", "--budget", "smoke", "--out", str(out), "--seeds", "0", "0"])
+    assert not out.exists()
