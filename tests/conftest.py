@@ -12,3 +12,39 @@ from transam.jaxcache import enable_compilation_cache
 
 enable_compilation_cache()
 jax.config.update("jax_enable_x64", False)
+
+
+# ------------------------------------------------------------------ xdist: one worker per group
+
+import pytest  # noqa: E402
+
+# Test files that share the session-scoped smoke grid below run on one xdist worker (so it is
+# built once); every other file is its own group (what --dist loadfile would do).
+GRID_FILES = {"test_reproduce.py", "test_evaluation.py", "test_grid_ray.py"}
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        name = item.path.name
+        item.add_marker(pytest.mark.xdist_group("grid" if name in GRID_FILES else name))
+
+
+@pytest.fixture(scope="session")
+def smoke_grid(tmp_path_factory: pytest.TempPathFactory):
+    """`transam reproduce --budget smoke` on Spread (nam, liam; seeds 0, 1) with the local
+    backend, one run of which was interrupted after its first checkpoint beforehand."""
+    from transam import grid
+    from transam.cli import main
+    from transam.train.loop import train
+
+    out = tmp_path_factory.mktemp("grid") / "smoke"
+    interrupted = grid.RunSpec("spread", "liam", 1)
+    out.mkdir()
+    grid.open_grid(out, "smoke", [interrupted], ["setup"])
+    config = grid.run_config(interrupted, grid.BUDGETS["smoke"], out)
+    assert not train(config, stop_after_chunks=1).finished
+    main(["reproduce", "--budget", "smoke", "--out", str(out), "--jobs", "1", *SMOKE_GRID])
+    return out
+
+
+SMOKE_GRID = ["--envs", "spread", "--methods", "nam", "liam", "--seeds", "0", "1"]

@@ -1,9 +1,9 @@
 """``transam evaluate``: the final evaluation JSON, figure and projection of a run, the linear
 partner probe and the run-directory handling.
 
-One tiny LIAM run on Spread (scripted partners; a decoder and a recurrent embedding) is trained
-once for the module; NAM's run directory (no decoder, no embedding) is written directly from
-an initial runner state (jitted init: eager init takes longer than its compile).
+The runs are the smoke grid's (conftest.py): LIAM on Spread (a decoder and a recurrent
+embedding) and NAM (neither), 1000 steps in two chunks; the evaluations here use the grid's
+episode count, so their program is the one the grid compiled.
 """
 
 from __future__ import annotations
@@ -13,11 +13,10 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-import jax
 import numpy as np
 import pytest
 
-from transam import envs
+from transam import envs, grid
 from transam.evaluation import (
     Evaluate,
     balanced_partners,
@@ -29,25 +28,17 @@ from transam.evaluation import (
     population_for,
     stratified_split,
 )
-from transam.train.config import ConfigError, EvalConfig, TrainConfig
-from transam.train.loop import _save_checkpoint, read_metrics, run_programs, train, write_json
+from transam.train.config import ConfigError
+from transam.train.loop import read_metrics, write_json
 
-EPISODES = 26  # two per partner of Spread's 13 scripted teams; one size: one compile
+EPISODES = grid.BUDGETS["smoke"].final_episodes  # 26: the grid's own size, compiled once
 
 
 @pytest.fixture(scope="module")
-def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("liam")
-    cfg = TrainConfig(
-        env="spread",
-        method="liam",
-        partners="heuristic",
-        total_steps=500,  # 10 updates in 2 chunks of 5: checkpoints chunk 0 and 1
-        eval=EvalConfig(every_episodes=10, episodes=4),
-        progress=False,
-        out=str(out),
-    )
-    assert train(cfg).finished
+def run_dir(smoke_grid: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A copy of the smoke grid's LIAM run (a decoder and a recurrent embedding)."""
+    out = tmp_path_factory.mktemp("liam") / "run"
+    shutil.copytree(smoke_grid / "runs/spread/liam/seed_0", out)
     return out
 
 
@@ -138,9 +129,9 @@ def test_config_round_trip_and_multi_seed_dirs(run_dir: Path, tmp_path: Path) ->
 def test_result_schema_and_files(run_dir: Path, result: dict[str, Any]) -> None:
     T = 25  # Spread's episode length
     assert (result["env"], result["method"], result["seed"]) == ("spread", "liam", 0)
-    assert (result["partners"], result["population"]) == ("train", "heuristic")
+    assert (result["partners"], result["population"]) == ("train", "default")
     assert result["checkpoint"] == "checkpoints/chunk_000001.msgpack"  # the newest
-    assert result["step"] == read_metrics(run_dir / "metrics.jsonl")[-1]["step"] == 500
+    assert result["step"] == read_metrics(run_dir / "metrics.jsonl")[-1]["step"] == 1000
     assert result["episodes"] == EPISODES
     assert np.isfinite(result["return"]["mean"]) and result["return"]["std"] > 0
     assert 0.0 <= result["action_accuracy"] <= 1.0 and result["obs_mse"] > 0
@@ -149,7 +140,7 @@ def test_result_schema_and_files(run_dir: Path, result: dict[str, Any]) -> None:
     assert per["cum_return"][-1] == pytest.approx(result["return"]["mean"], rel=1e-9)
     # Spread's rewards are negative every step: the cumulative reward falls.
     assert all(b < a for a, b in zip(per["cum_return"], per["cum_return"][1:], strict=False))
-    teams = envs.make("spread", partners="heuristic").population.team_names
+    teams = envs.make("spread").population.team_names
     assert list(result["per_partner_return"]) == list(teams)  # balanced: every partner plays
     probe = result["probe"]
     assert 0.0 <= probe["accuracy"] <= 1.0 and len(probe["per_step"]) == T
@@ -182,9 +173,9 @@ def test_heldout_partners(run_dir: Path, result: dict[str, Any]) -> None:
     assert (held["partners"], held["population"], held["trained_partners"]) == (
         "heldout",
         "heldout",
-        "heuristic",
+        "default",
     )
-    assert held["population_name"] == "spread-heldout" and "heldout" in held["notes"][0]
+    assert held["population_name"] == "spread-heldout"
     teams = envs.make("spread", partners="heldout").population.team_names
     assert list(held["per_partner_return"]) == list(teams)
     assert evaluation_path(run_dir, "heldout").exists()
@@ -195,7 +186,7 @@ def test_named_checkpoint_and_bad_names(run_dir: Path, tmp_path: Path) -> None:
     copy = tmp_path / "run"
     shutil.copytree(run_dir, copy)
     first = evaluate_run(copy, episodes=EPISODES, checkpoint="chunk_000000.msgpack")
-    assert first["checkpoint"] == "checkpoints/chunk_000000.msgpack" and first["step"] == 250
+    assert first["checkpoint"] == "checkpoints/chunk_000000.msgpack" and first["step"] == 500
     assert evaluate_run(copy, episodes=EPISODES, checkpoint="0") == first
     with pytest.raises(ConfigError, match=r"'7' not found.*chunk_000000.msgpack, chunk_000001"):
         evaluate_run(copy, episodes=EPISODES, checkpoint="7")
@@ -216,14 +207,13 @@ def test_cli_prints_a_summary(
     assert "partner probe accuracy" in out and "eval_train.json" in out
 
 
-def test_nam_has_no_decoder_metrics_and_no_probe(tmp_path: Path) -> None:
-    cfg = TrainConfig(env="spread", method="nam", partners="heuristic", out=str(tmp_path))
-    write_json(tmp_path / "config.json", cfg.identity())
-    _save_checkpoint(tmp_path, 0, jax.device_get(run_programs(cfg).init(jax.random.key(0))))
-    res = evaluate_run(tmp_path, episodes=EPISODES)
+def test_nam_has_no_decoder_metrics_and_no_probe(smoke_grid: Path, tmp_path: Path) -> None:
+    run = tmp_path / "nam"
+    shutil.copytree(smoke_grid / "runs/spread/nam/seed_0", run)
+    res = evaluate_run(run, episodes=EPISODES)
     for key in ("action_accuracy", "obs_mse", "probe", "pca"):
         assert key not in res
-    assert set(res["per_step"]) == {"cum_return"} and res["step"] == 0
-    assert "not finished" in res["notes"][0] and "no learned embedding" in res["notes"][1]
-    assert not (tmp_path / "eval_train_pca.npz").exists()
-    assert (tmp_path / "eval_train.png").exists()
+    assert set(res["per_step"]) == {"cum_return"} and res["step"] == 1000
+    assert any("no learned embedding" in note for note in res["notes"])
+    assert not (run / "eval_train_pca.npz").exists()
+    assert (run / "eval_train.png").exists()

@@ -1,5 +1,6 @@
-"""`transam reproduce --budget smoke` end to end: the grid, its evaluations and the report; an
-interrupted run is resumed from its checkpoint and finished runs are never redone."""
+"""`transam reproduce --budget smoke` end to end (the session fixture ``smoke_grid`` in
+conftest.py): the grid, its evaluations and the report; an interrupted run is resumed from its
+checkpoint and finished runs are never redone."""
 
 from __future__ import annotations
 
@@ -10,24 +11,15 @@ import pytest
 
 from transam import grid
 from transam.cli import main
-from transam.train.loop import read_metrics, train
+from transam.train.loop import read_metrics
 
 ENVS, METHODS, SEEDS = ["spread"], ["nam", "liam"], [0, 1]
-GRID = ["--envs", *ENVS, "--methods", *METHODS, "--seeds", *map(str, SEEDS)]
+GRID = ["--envs", *ENVS, "--methods", *METHODS, "--seeds", *map(str, SEEDS)]  # = SMOKE_GRID
 
 
 @pytest.fixture(scope="module")
-def smoke(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("grid") / "smoke"
-    # An interrupted run: the first chunk is checkpointed, then the process "dies".
-    spec = grid.RunSpec("spread", "liam", 1)
-    config = grid.run_config(spec, grid.BUDGETS["smoke"], out)
-    out.mkdir()
-    grid.open_grid(out, "smoke", [spec], ["setup"])
-    assert not train(config, stop_after_chunks=1).finished
-    argv = ["reproduce", "--budget", "smoke", "--out", str(out), "--jobs", "1"]
-    main([*argv, *GRID])
-    return out
+def smoke(smoke_grid: Path) -> Path:
+    return smoke_grid
 
 
 def test_every_run_is_trained_and_evaluated(smoke: Path) -> None:

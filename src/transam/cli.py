@@ -278,6 +278,11 @@ class Reproduce:
         seeds = self.seeds or tuple(range(budget.seeds))
         specs = grid.grid_specs(self.envs, self.methods, seeds)
         out = Path(self.out)
+        address = None if self.address == "local" else self.address
+        if self.backend == "ray":  # a missing Ray or a bad address fails before writing
+            from transam.grid_ray import connect
+
+            connect(address)
         grid.open_grid(out, self.budget, specs, ["transam", *_ARGV])
         console.print(
             f"{len(specs)} runs ({len(self.envs)} envs x {len(self.methods)} methods x "
@@ -291,7 +296,7 @@ class Reproduce:
                 out,
                 specs,
                 budget,
-                address=None if self.address == "local" else self.address,
+                address=address,
                 cpus_per_run=self.cpus_per_run,
                 gpus_per_run=self.gpus_per_run,
                 max_retries=self.max_retries,

@@ -57,7 +57,8 @@ class Budget:
 
 BUDGETS: dict[str, Budget] = {
     # Minutes: a test runs it end to end (every artefact, no learning expected).
-    "smoke": Budget(total_steps=1_000, seeds=2, evals=2, eval_episodes=8, final_episodes=16),
+    # (26 final episodes: two per partner team of Spread, the probe's minimum.)
+    "smoke": Budget(total_steps=1_000, seeds=2, evals=2, eval_episodes=8, final_episodes=26),
     # What fits about an hour on a 2-core CPU for all 4 envs x 10 methods (docs/results/).
     "small": Budget(total_steps=30_000, seeds=2, evals=6, eval_episodes=16, final_episodes=100),
     # The paper: 10M steps, 5 seeds.
@@ -240,34 +241,46 @@ def spec_from_rel(rel: str) -> RunSpec:
 Backend = Callable[[Path, list[RunSpec], Budget], list[str]]
 
 
-def _run_one_in_subprocess(args: tuple[str, RunSpec, Budget]) -> dict[str, Any]:
+def _run_group(out: str, specs: list[RunSpec], budget: Budget) -> list[str]:
+    """Run the seeds of one (env, method) one after another in this process, so the seeds after
+    the first reuse its compiled programs; returns the failures."""
+    failures = []
+    for spec in specs:
+        try:
+            run_one(out, spec, budget)
+        except Exception as err:  # one bad run must not stop the grid
+            failures.append(f"{spec.rel}: {type(err).__name__}: {err}")
+    return failures
+
+
+def _run_group_in_subprocess(out: str, specs: list[RunSpec], budget: Budget) -> list[str]:
     from transam.jaxcache import enable_compilation_cache
 
     enable_compilation_cache()
-    return run_one(*args)
+    return _run_group(out, specs, budget)
 
 
 def run_local(out: Path, specs: list[RunSpec], budget: Budget, jobs: int = 1) -> list[str]:
-    """Run the grid on this machine, ``jobs`` runs at a time (separate processes when > 1: one
-    XLA:CPU training program does not keep two cores busy). Returns the failed runs."""
-    failures: list[str] = []
+    """Run the grid on this machine. With ``jobs`` > 1, that many (env, method) groups run at a
+    time in separate processes (one XLA:CPU training program does not keep two cores busy);
+    each group runs its seeds in turn and compiles once. Returns the failed runs."""
+    groups: dict[tuple[str, str], list[RunSpec]] = {}
+    for spec in specs:
+        groups.setdefault((spec.env, spec.method), []).append(spec)
     if jobs <= 1:
-        for spec in specs:
-            try:
-                run_one(out, spec, budget)
-            except Exception as err:  # one bad run must not stop the grid
-                failures.append(f"{spec.rel}: {type(err).__name__}: {err}")
-        return failures
+        return [f for group in groups.values() for f in _run_group(str(out), group, budget)]
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
+    failures: list[str] = []
     with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
         futures = {
-            spec: pool.submit(_run_one_in_subprocess, (str(out), spec, budget)) for spec in specs
+            pool.submit(_run_group_in_subprocess, str(out), group, budget): group
+            for group in groups.values()
         }
-        for spec, fut in futures.items():
+        for fut, group in futures.items():
             try:
-                fut.result()
-            except Exception as err:
-                failures.append(f"{spec.rel}: {type(err).__name__}: {err}")
+                failures += fut.result()
+            except Exception as err:  # a worker process died: rerun the command to resume
+                failures += [f"{s.rel}: {type(err).__name__}: {err}" for s in group]
     return failures
