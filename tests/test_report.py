@@ -468,9 +468,9 @@ def test_pca_file_is_read_and_bad_files_are_tolerated(tmp_path: Path) -> None:
 def test_cli_prints_a_summary(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     write_grid(tmp_path, GOOD_RET, GOOD_ACC, envs=("lbf",), methods=("transam", "nam"))
     Report(tmp_path).run()
-    text = " ".join(capsys.readouterr().out.split())
-    assert "report.md" in text and "6 finished" in text and "claims not run:" in text
-    assert re.search(r"lbf\s*│\s*transam\s*│\s*3\s*│\s*10\.\d\d \[", text)  # summary table
+    text = "".join(capsys.readouterr().out.split())  # rich wraps long paths mid-word
+    assert "report.md" in text and "6finished" in text and "claimsnotrun:" in text
+    assert re.search(r"lbf│transam│3│10\.\d\d\[", text)  # summary table
 
 
 def test_a_directory_without_a_grid_is_rejected(tmp_path: Path) -> None:
