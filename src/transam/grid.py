@@ -231,9 +231,12 @@ def close_grid(out: Path, failures: list[str]) -> None:
 
 
 def spec_from_rel(rel: str) -> RunSpec:
-    """Inverse of :attr:`RunSpec.rel`."""
-    _, env, method, seed = rel.split("/")
-    return RunSpec(env, method, int(seed.removeprefix("seed_")))
+    """Inverse of :attr:`RunSpec.rel`; ValueError for anything that is not
+    ``runs/ENV/METHOD/seed_S``."""
+    parts = rel.strip("/").split("/")
+    if len(parts) != 4 or parts[0] != "runs" or not parts[3].startswith("seed_"):
+        raise ValueError(f"not a grid run path (runs/ENV/METHOD/seed_S): {rel!r}")
+    return RunSpec(parts[1], parts[2], int(parts[3].removeprefix("seed_")))
 
 
 # ---------------------------------------------------------------- backends

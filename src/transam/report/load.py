@@ -97,13 +97,13 @@ def order_key(order: tuple[str, ...]) -> Any:
 
 def parse_rel(rel: str) -> tuple[str, str, int] | None:
     """``runs/ENV/METHOD/seed_S`` -> (env, method, seed), or None for anything else."""
-    parts = rel.strip("/").split("/")
-    if len(parts) != 4 or parts[0] != "runs" or not parts[3].startswith("seed_"):
-        return None
+    from transam.grid import spec_from_rel
+
     try:
-        return parts[1], parts[2], int(parts[3].removeprefix("seed_"))
+        spec = spec_from_rel(rel)
     except ValueError:
         return None
+    return spec.env, spec.method, spec.seed
 
 
 def _read_json(path: Path, problems: list[str]) -> Any:
