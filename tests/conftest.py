@@ -23,6 +23,7 @@ import pytest  # noqa: E402
 GRID_FILES = {"test_reproduce.py", "test_evaluation.py", "test_grid_ray.py"}
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the markers into node ids
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         name = item.path.name

@@ -27,9 +27,10 @@ SMOKE = grid.BUDGETS["smoke"]
 def ray_session() -> Any:
     import ray  # a test extra: installed wherever the tests run
 
-    # One run at a time: every worker process compiles (or loads) each program itself, so on
-    # the 2-core CI machine two workers take twice the CPU for the same grid.
-    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
+    # A 2-CPU instance, and 2 CPUs per run (below): one run at a time, as XLA uses both cores.
+    # Each Ray worker process compiles (or loads) every program itself, so two concurrent
+    # 1-CPU workers took twice the CPU for the same grid on the 2-core CI machine.
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield ray
     ray.shutdown()
 
@@ -92,7 +93,7 @@ def test_ray_grid_with_a_killed_worker_matches_the_local_grid(
     killer = threading.Thread(target=_kill_after_first_checkpoint, args=(out, victim, killed))
     killer.start()
     try:
-        failures = run_ray(out, [*specs, bad], SMOKE)
+        failures = run_ray(out, [*specs, bad], SMOKE, cpus_per_run=2)
     finally:
         killer.join()
     grid.close_grid(out, failures)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from transam import grid
@@ -27,8 +28,15 @@ def test_every_run_is_trained_and_evaluated(smoke: Path) -> None:
     for spec in specs:
         run = smoke / spec.rel
         assert (run / "final.json").exists()
-        chunks = [r["chunk"] for r in read_metrics(run / "metrics.jsonl")]
-        assert chunks == list(range(len(chunks))) and len(chunks) >= 2
+        records = read_metrics(run / "metrics.jsonl")
+        assert [r["chunk"] for r in records] == list(range(len(records))) and len(records) >= 2
+        for rec in records:  # LIAM reconstructs both; NAM has no decoder (absent, not zero)
+            assert np.isfinite(rec["eval/return"]) and np.isfinite(rec["train/policy_loss"])
+            assert (
+                ("eval/action_accuracy" in rec)
+                == ("eval/obs_mse" in rec)
+                == (spec.method == "liam")
+            )
         for partners in grid.EVAL_PARTNERS:
             ev = json.loads((run / f"eval_{partners}.json").read_text())
             assert ev["episodes"] == grid.BUDGETS["smoke"].final_episodes
