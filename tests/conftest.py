@@ -5,6 +5,10 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
+# The suite is mostly XLA compilation of small programs run briefly: LLVM's optimisation level
+# 0 compiles the tiny training runs ~30% faster (47 s -> 33 s on 2 cores). Subprocesses (grid
+# workers, Ray) inherit it.
+os.environ.setdefault("XLA_FLAGS", "--xla_backend_optimization_level=0")
 
 import jax
 
