@@ -38,6 +38,8 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 def smoke_grid(tmp_path_factory: pytest.TempPathFactory):
     """`transam reproduce --budget smoke` on Spread (nam, liam; seeds 0, 1) with the local
     backend, one run of which was interrupted after its first checkpoint beforehand."""
+    from local_data import SMOKE_ARGS
+
     from transam import grid
     from transam.cli import main
     from transam.train.loop import train
@@ -48,8 +50,5 @@ def smoke_grid(tmp_path_factory: pytest.TempPathFactory):
     grid.open_grid(out, "smoke", [interrupted], ["setup"])
     config = grid.run_config(interrupted, grid.BUDGETS["smoke"], out)
     assert not train(config, stop_after_chunks=1).finished
-    main(["reproduce", "--budget", "smoke", "--out", str(out), "--jobs", "1", *SMOKE_GRID])
+    main(["reproduce", "--budget", "smoke", "--out", str(out), "--jobs", "1", *SMOKE_ARGS])
     return out
-
-
-SMOKE_GRID = ["--envs", "spread", "--methods", "nam", "liam", "--seeds", "0", "1"]

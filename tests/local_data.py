@@ -1,4 +1,5 @@
-"""Shared test data: what the trainer's execution path sees, from a uniformly random agent."""
+"""Shared test data: the smoke grid every grid test uses (conftest builds it), and what the
+trainer's execution path sees, from a uniformly random agent."""
 
 from __future__ import annotations
 
@@ -10,6 +11,14 @@ import jax
 from transam.envs.core import ControlledEnv, PartnerRecord
 from transam.models.base import LocalStep, PartnerView
 from transam.train import a2c
+
+SMOKE_ENVS, SMOKE_METHODS, SMOKE_SEEDS = ["spread"], ["nam", "liam"], [0, 1]
+SMOKE_ARGS = [
+    *("--envs", *SMOKE_ENVS),
+    *("--methods", *SMOKE_METHODS),
+    *("--seeds", *map(str, SMOKE_SEEDS)),
+]
+"""The `transam reproduce` arguments of the smoke grid (with --budget smoke)."""
 
 
 @partial(jax.jit, static_argnums=(0, 2, 3))

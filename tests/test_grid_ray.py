@@ -13,13 +13,15 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from local_data import SMOKE_ENVS as ENVS
+from local_data import SMOKE_METHODS as METHODS
+from local_data import SMOKE_SEEDS as SEEDS
 
 from transam import grid
 from transam.grid_ray import connect, run_ray
 from transam.train.config import ConfigError
 from transam.train.loop import read_metrics
 
-ENVS, METHODS, SEEDS = ["spread"], ["nam", "liam"], [0, 1]
 SMOKE = grid.BUDGETS["smoke"]
 
 

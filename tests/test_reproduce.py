@@ -9,13 +9,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from local_data import SMOKE_ARGS as GRID
+from local_data import SMOKE_ENVS as ENVS
+from local_data import SMOKE_METHODS as METHODS
+from local_data import SMOKE_SEEDS as SEEDS
 
 from transam import grid
 from transam.cli import main
 from transam.train.loop import read_metrics
-
-ENVS, METHODS, SEEDS = ["spread"], ["nam", "liam"], [0, 1]
-GRID = ["--envs", *ENVS, "--methods", *METHODS, "--seeds", *map(str, SEEDS)]  # = SMOKE_GRID
 
 
 @pytest.fixture(scope="module")

@@ -127,9 +127,9 @@ def load_run_config(run_dir: str | Path) -> TrainConfig:
 def find_checkpoint(run_dir: str | Path, checkpoint: str | int | None = None) -> Path:
     """The newest checkpoint of ``run_dir``, or the named one (a file name such as
     ``chunk_000003.msgpack``, with or without the suffix, or a chunk number)."""
-    from transam.train.loop import _checkpoints
+    from transam.train.loop import checkpoints
 
-    found = _checkpoints(Path(run_dir))
+    found = checkpoints(Path(run_dir))
     names = ", ".join(p.name for _, p in sorted(found.items()))
     if not found:
         raise ConfigError(f"no checkpoints in {str(Path(run_dir) / 'checkpoints')!r}")

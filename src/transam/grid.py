@@ -133,14 +133,14 @@ def run_one(out: str | Path, spec: RunSpec, budget: Budget) -> dict[str, Any]:
     """Train (or resume, or skip) one grid run, then evaluate it on the training and held-out
     partners where not done yet. Safe to call again after any failure; returns a summary."""
     from transam.evaluation import evaluate_run, evaluation_path
-    from transam.train.loop import _checkpoints, train
+    from transam.train.loop import checkpoints, train
 
     out = Path(out)
     config = run_config(spec, budget, out)
     run_dir = Path(config.run_dir)
     finished = (run_dir / "final.json").exists()
     started = (run_dir / "config.json").exists()
-    start_chunk = max(_checkpoints(run_dir), default=-1) + 1 if started else 0
+    start_chunk = max(checkpoints(run_dir), default=-1) + 1 if started else 0
     tic = time.time()
     if not finished:
         _log(

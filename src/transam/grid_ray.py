@@ -74,7 +74,7 @@ def run_ray(
     if started:
         connect(address)
     try:
-        if started and address in (None, "local"):
+        if address in (None, "local"):  # whoever started it (`transam reproduce` connects first)
             _check_fits(ray.cluster_resources(), cpus_per_run, gpus_per_run)
         return _run(ray, out, specs, budget, cpus_per_run, gpus_per_run, max_retries)
     finally:

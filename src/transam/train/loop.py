@@ -185,7 +185,8 @@ def read_metrics(path: Path) -> list[dict[str, Any]]:
     return records
 
 
-def _checkpoints(seed_dir: Path) -> dict[int, Path]:
+def checkpoints(seed_dir: Path) -> dict[int, Path]:
+    """A run's checkpoint files by chunk index (what --resume, evaluation and the grid read)."""
     found = {}
     for p in (seed_dir / "checkpoints").glob("chunk_*.msgpack"):
         try:
@@ -202,7 +203,7 @@ def _save_checkpoint(seed_dir: Path, chunk: int, state: RunnerState) -> None:
 
 
 def _prune_checkpoints(seed_dir: Path) -> None:
-    for _, p in sorted(_checkpoints(seed_dir).items())[:-KEEP_CHECKPOINTS]:
+    for _, p in sorted(checkpoints(seed_dir).items())[:-KEEP_CHECKPOINTS]:
         p.unlink(missing_ok=True)
 
 
@@ -452,13 +453,13 @@ def _run_group(
     state = stack([progs.init(k) for k in init_keys])
 
     # Resume from the newest chunk checkpointed for every seed of the group.
-    common = set.intersection(*(set(_checkpoints(d)) for d in dirs))
+    common = set.intersection(*(set(checkpoints(d)) for d in dirs))
     start = max(common) + 1 if common else 0
     if start:
         template = unstack(jax.device_get(state))[0]
         state = stack(
             [
-                serialization.from_bytes(template, _checkpoints(d)[start - 1].read_bytes())
+                serialization.from_bytes(template, checkpoints(d)[start - 1].read_bytes())
                 for d in dirs
             ]
         )
