@@ -283,13 +283,9 @@ def evaluate_run(
         raise ConfigError(f"episodes must be an integer >= 2, got {episodes!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
-    if partners not in EVAL_PARTNERS:
-        raise ConfigError(
-            f"unknown partners {partners!r}; valid choices: {', '.join(EVAL_PARTNERS)}"
-        )
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
-    population = population_for(config.partners, partners)
+    population = population_for(config.partners, partners)  # checks ``partners``
     ckpt = find_checkpoint(run_dir, checkpoint)
     state = _restore(config, ckpt)
 
