@@ -105,7 +105,9 @@ def load_run_config(run_dir: str | Path) -> TrainConfig:
         if match and (run_dir.parent / "config.json").exists():
             path, seed = run_dir.parent / "config.json", int(match.group(1))
         else:
-            raise ConfigError(f"{str(run_dir)!r} holds no transam run (no config.json)")
+            inside = sorted(str(c.parent) for c in run_dir.glob("*/config.json"))
+            hint = f"; runs inside it: {', '.join(inside)}" if inside else ""
+            raise ConfigError(f"{str(run_dir)!r} holds no transam run (no config.json){hint}")
     config: TrainConfig = _from_dict(TrainConfig, json.loads(path.read_text()), str(path))
     if seed is not None:
         seeds = range(config.seed, config.seed + config.num_seeds)
