@@ -164,12 +164,14 @@ def test_episode_boundaries_inside_rollouts_reset_every_carry() -> None:
     @jax.jit
     def training_path(params: Any, model_params: Any, traj: a2c.Trajectory) -> Any:
         x = traj.x
-        _, _, values = policy.unroll(params, traj.policy_carry0, x.obs, traj.z, x.first)
-        _, _, no_reset = policy.unroll(params, traj.policy_carry0, x.obs, traj.z, x.first & False)
+        _, _, values = policy.unroll(params, traj.policy_carry0, x, traj.z)
+        never_first = x.replace(first=x.first & False)
+        _, _, no_reset = policy.unroll(params, traj.policy_carry0, never_first, traj.z)
         z = jax.vmap(model.embed_rollout, in_axes=(None, 0, 1), out_axes=1)(
             model_params, traj.model_carry0, x
         )
-        _, _, fresh = policy.step(params, policy.init_carry((4,)), x.obs[2], traj.z[2], x.first[2])
+        x2 = jax.tree.map(lambda a: a[2], x)
+        _, _, fresh = policy.step(params, policy.init_carry((4,)), x2, traj.z[2])
         return values, no_reset, z, fresh
 
     trajs = []
@@ -184,7 +186,9 @@ def test_episode_boundaries_inside_rollouts_reset_every_carry() -> None:
         np.testing.assert_allclose(z, traj.z)
         # A first step's output equals the output from a zero carry.
         first = np.asarray(traj.x.first[2])
-        np.testing.assert_allclose(np.asarray(fresh)[first], np.asarray(traj.value[2])[first])
+        np.testing.assert_allclose(
+            np.asarray(fresh)[first], np.asarray(traj.value[2])[first], rtol=1e-5, atol=1e-6
+        )
     tr = _concat(trajs)  # [20, 4] over 4 consecutive rollouts
     done, x, z = tr.done, tr.x, tr.z
     assert done[:-1].any(axis=0).all() and x.first[0].all()
@@ -240,16 +244,40 @@ def test_losses_finite_and_backprop_flag_controls_encoder_grads(backprop: bool) 
     assert np.isfinite(ev["obs_mse"]) and ev["per_step/action_accuracy"].shape == (3,)
 
 
+def local_steps(obs: jax.Array, t: jax.Array, first: jax.Array) -> LocalStep:
+    n = obs.shape[0]
+    zeros = jnp.zeros((n,), jnp.int32)
+    return LocalStep(obs, zeros, zeros.astype(jnp.float32), t, first)
+
+
 def test_policy_resets_its_lstm_carry_at_first() -> None:
     policy = Policy(num_actions=3, hidden=8)
     params = policy.init(jax.random.key(0), 2, 1)
-    obs, z = jnp.ones((2, 2)), jnp.zeros((2, 1))
+    x = local_steps(jnp.ones((2, 2)), jnp.zeros((2,), jnp.int32), jnp.array([True, False]))
+    z = jnp.zeros((2, 1))
     junk = (jnp.full((2, 8), 5.0), jnp.full((2, 8), -3.0))
-    first = jnp.array([True, False])
-    _, logits, _ = policy.step(params, junk, obs, z, first)
-    _, logits0, _ = policy.step(params, policy.init_carry((2,)), obs, z, first)
+    _, logits, _ = policy.step(params, junk, x, z)
+    _, logits0, _ = policy.step(params, policy.init_carry((2,)), x, z)
     np.testing.assert_allclose(logits[0], logits0[0])
     assert not np.allclose(logits[1], logits0[1])
+
+
+def test_policy_clock_is_an_input_only_with_a_horizon() -> None:
+    """With a horizon the policy sees t / horizon (its critic can tell an episode's last steps
+    from its first); without one the clock is ignored, as in the reference."""
+    z = jnp.zeros((2, 1))
+    same_obs = jnp.ones((2, 2))
+    x = local_steps(same_obs, jnp.array([0, 24]), jnp.array([True, True]))
+    timed = Policy(num_actions=3, hidden=8, horizon=25)
+    params = timed.init(jax.random.key(0), 2, 1)
+    assert params["params"]["lstm"]["ii"]["kernel"].shape[0] == 2 + 1 + 1  # obs, clock, z
+    np.testing.assert_allclose(timed.inputs(x)[:, -1], [0.0, 24 / 25])
+    _, _, values = timed.step(params, timed.init_carry((2,)), x, z)
+    assert abs(float(values[0] - values[1])) > 1e-6
+    plain = Policy(num_actions=3, hidden=8)
+    params = plain.init(jax.random.key(0), 2, 1)
+    _, _, values = plain.step(params, plain.init_carry((2,)), x, z)
+    assert float(values[0]) == float(values[1])
 
 
 # ------------------------------------------------------------------ whole runs (NAM on Spread)

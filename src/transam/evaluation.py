@@ -53,7 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 import tyro
 
-from transam.train.config import ConfigError, TrainConfig
+from transam.train.config import ConfigError, TrainConfig, with_added_settings
 
 EvalPartners = Literal["train", "heldout"]
 EVAL_PARTNERS: tuple[EvalPartners, ...] = ("train", "heldout")
@@ -108,7 +108,8 @@ def load_run_config(run_dir: str | Path) -> TrainConfig:
             inside = sorted(str(c.parent) for c in run_dir.glob("*/config.json"))
             hint = f"; runs inside it: {', '.join(inside)}" if inside else ""
             raise ConfigError(f"{str(run_dir)!r} holds no transam run (no config.json){hint}")
-    config: TrainConfig = _from_dict(TrainConfig, json.loads(path.read_text()), str(path))
+    saved = with_added_settings(json.loads(path.read_text()))
+    config: TrainConfig = _from_dict(TrainConfig, saved, str(path))
     if seed is not None:
         seeds = range(config.seed, config.seed + config.num_seeds)
         if config.num_seeds == 1 or seed not in seeds:

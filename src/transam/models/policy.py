@@ -1,8 +1,10 @@
 """The shared A2C policy: LSTM(128) -> Linear(128) + ReLU -> actor logits and critic value.
 
 Every agent-modeling method feeds the same policy with concat(o_t, z_t), as the paper and the
-authors' code do, so that methods differ only in z. The network acts on any leading batch
-shape (the trainer passes [num_envs]); :meth:`Policy.unroll` adds a time axis in front.
+authors' code do, so that methods differ only in z. With a ``horizon`` the agent's own clock
+t / horizon is appended (the trainer's ``time_feature``; local data, so every method may see
+it). The network acts on any leading batch shape (the trainer passes [num_envs]);
+:meth:`Policy.unroll` adds a time axis in front.
 
 The LSTM carry is zeroed inside :meth:`Policy.step` whenever ``first`` is set, so a caller
 cannot leak memory across an episode boundary.
@@ -17,6 +19,8 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from transam.models.base import LocalStep
 
 Params = Any
 LSTMCarry = tuple[jax.Array, jax.Array]
@@ -54,6 +58,7 @@ class Policy:
 
     num_actions: int
     hidden: int = 128
+    horizon: int | None = None  # append t / horizon to the input (None: observation only)
 
     @property
     def net(self) -> ActorCriticLSTM:
@@ -61,13 +66,22 @@ class Policy:
 
     def init(self, key: jax.Array, obs_dim: int, z_dim: int) -> Params:
         """Fresh parameters for observations of width ``obs_dim`` and embeddings of ``z_dim``."""
+        clock = 0 if self.horizon is None else 1
         return self.net.init(
             key,
             self.init_carry(),
-            jnp.zeros((obs_dim,), jnp.float32),
+            jnp.zeros((obs_dim + clock,), jnp.float32),
             jnp.zeros((z_dim,), jnp.float32),
             jnp.ones((), bool),
         )
+
+    def inputs(self, x: LocalStep) -> jax.Array:
+        """The observation part of the input: o_t, then t / horizon when there is a horizon."""
+        obs = jnp.asarray(x.obs, jnp.float32)
+        if self.horizon is None:
+            return obs
+        clock = jnp.asarray(x.t, jnp.float32)[..., None] / self.horizon
+        return jnp.concatenate([obs, clock], axis=-1)
 
     def init_carry(self, batch_shape: tuple[int, ...] = ()) -> LSTMCarry:
         """The all-zero carry (what ``first=True`` resets to)."""
@@ -75,21 +89,22 @@ class Policy:
         return (zeros, zeros)
 
     def step(
-        self, params: Params, carry: LSTMCarry, obs: jax.Array, z: jax.Array, first: jax.Array
+        self, params: Params, carry: LSTMCarry, x: LocalStep, z: jax.Array
     ) -> tuple[LSTMCarry, jax.Array, jax.Array]:
-        """(new carry, action logits [..., num_actions], value [...]) for one step."""
-        out = self.net.apply(params, carry, obs, z, first)
+        """(new carry, action logits [..., num_actions], value [...]) for one step on what the
+        agent knows (``x``: o_t, its clock, ``first``) and the embedding ``z``."""
+        out = self.net.apply(params, carry, self.inputs(x), z, x.first)
         return cast(tuple[LSTMCarry, jax.Array, jax.Array], out)
 
     def unroll(
-        self, params: Params, carry: LSTMCarry, obs: jax.Array, z: jax.Array, first: jax.Array
+        self, params: Params, carry: LSTMCarry, xs: LocalStep, z: jax.Array
     ) -> tuple[LSTMCarry, jax.Array, jax.Array]:
         """:meth:`step` over a leading time axis T from ``carry``: (final carry, logits [T, ...],
         values [T, ...]); the training path, differentiable through time."""
 
-        def body(c: LSTMCarry, inp: tuple[jax.Array, ...]) -> tuple[LSTMCarry, tuple[Any, Any]]:
+        def body(c: LSTMCarry, inp: tuple[Any, jax.Array]) -> tuple[LSTMCarry, tuple[Any, Any]]:
             c, logits, value = self.step(params, c, *inp)
             return c, (logits, value)
 
-        carry, (logits, values) = jax.lax.scan(body, carry, (obs, z, first))
+        carry, (logits, values) = jax.lax.scan(body, carry, (xs, z))
         return carry, logits, values

@@ -21,10 +21,12 @@ step on the rollout's last observation: acting on it again after the update (wit
 parameters) keeps the next rollout exactly on-policy, as PureJaxRL and SB3 do.
 
 Episodes end by time limit or termination alike (``done``); no bootstrapping across ``done``,
-as in the reference A2C. With ``normalize_returns`` the critic predicts standardised returns
-(running mean/std of the GAE returns) and advantages are divided by the same std. The value loss
-is 0.5 * squared error (the paper's A2C objective) times ``vf_coef``. Steps are controlled-agent
-steps summed over parallel environments.
+as in the reference A2C. So that the critic can see a time limit coming, the policy input
+includes the agent's clock t / episode_len (``time_feature``; the reference has none). With
+``normalize_returns`` the critic predicts standardised returns (running mean/std of the GAE
+returns) and advantages are divided by the same std. The value loss is 0.5 * squared error
+(the paper's A2C objective) times ``vf_coef``. Steps are controlled-agent steps summed over
+parallel environments.
 """
 
 from __future__ import annotations
@@ -120,7 +122,8 @@ def total_updates(config: TrainConfig) -> int:
 
 
 def make_policy(config: TrainConfig, env: ControlledEnv) -> Policy:
-    return Policy(num_actions=env.spec.num_actions, hidden=config.a2c.hidden)
+    horizon = env.spec.episode_len if config.a2c.time_feature else None
+    return Policy(num_actions=env.spec.num_actions, hidden=config.a2c.hidden, horizon=horizon)
 
 
 def make_optimizers(config: TrainConfig) -> tuple[optax.GradientTransformation, ...]:
@@ -186,7 +189,7 @@ def act(
     carry, model carry, z, logits, value)."""
     partner = partner_view(model, env_state)
     model_carry, z = model_step(model, model_params, model_carry, x, partner)
-    policy_carry, logits, value = policy.step(policy_params, policy_carry, x.obs, z, x.first)
+    policy_carry, logits, value = policy.step(policy_params, policy_carry, x, z)
     return policy_carry, model_carry, z, logits, value
 
 
@@ -327,9 +330,7 @@ def a2c_losses(
     targets: jax.Array,
 ) -> dict[str, jax.Array]:
     """Policy-gradient, value and entropy terms of the rollout (means over steps and envs)."""
-    _, logits, values = policy.unroll(
-        policy_params, traj.policy_carry0, traj.x.obs, z, traj.x.first
-    )
+    _, logits, values = policy.unroll(policy_params, traj.policy_carry0, traj.x, z)
     logp_all = jax.nn.log_softmax(logits)
     logp = jnp.take_along_axis(logp_all, traj.action[..., None], axis=-1)[..., 0]
     entropy = -(jnp.exp(logp_all) * logp_all).sum(-1).mean()
@@ -414,6 +415,7 @@ def make_update(
         model_params = optax.apply_updates(rs.model_params, upd)
         metrics["grad_norm/policy"] = optax.tree.norm(g_policy)
         metrics["grad_norm/model"] = optax.tree.norm(g_model)
+        metrics["advantage_mean"] = adv.mean()  # ~0 for an unbiased critic
         metrics["episodes"] = traj.done.sum(dtype=jnp.int32)
         metrics["return_sum"] = traj.finished_return.sum()
         rs = dataclasses.replace(

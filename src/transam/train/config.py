@@ -72,6 +72,11 @@ class A2CConfig:
     """let the RL loss back-propagate into the agent model (reference: it does not)"""
     hidden: int = 128
     """LSTM and linear-layer width of the policy"""
+    time_feature: bool = True
+    """append the agent's own clock t / episode_len to the policy input (actor and critic).
+    The reference does not, and treats the time limit as terminal: its critic cannot tell the
+    last steps of an episode from the first and overestimates the future there, which biases
+    every end-of-episode advantage (see docs/results/README.md, "NAM on Spread")"""
 
 
 @dataclass(frozen=True)
@@ -187,6 +192,20 @@ class TrainConfig:
         for key in ("out", "resume", "force", "progress"):
             d.pop(key)
         return d
+
+
+ADDED_SETTINGS: dict[tuple[str, str], Any] = {("a2c", "time_feature"): False}
+"""Settings added after runs were first written, with the value that reproduces those runs."""
+
+
+def with_added_settings(saved: dict[str, Any]) -> dict[str, Any]:
+    """A saved config.json as today's settings: each setting the run predates gets the value
+    the run was trained with (so its checkpoints load and ``--resume`` compares like with like)."""
+    saved = {k: dict(v) if isinstance(v, dict) else v for k, v in saved.items()}
+    for (group, name), value in ADDED_SETTINGS.items():
+        if isinstance(saved.get(group), dict):
+            saved[group].setdefault(name, value)
+    return saved
 
 
 def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:

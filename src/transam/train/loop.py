@@ -51,7 +51,7 @@ from transam.train.a2c import (
     steps_per_update,
     total_updates,
 )
-from transam.train.config import ConfigError, TrainConfig
+from transam.train.config import ConfigError, TrainConfig, with_added_settings
 from transam.train.evaluate import make_evaluate
 
 KEEP_CHECKPOINTS = 2
@@ -237,7 +237,7 @@ def prepare_run_dir(config: TrainConfig) -> str:
         raise RunDirError(
             f"--out {str(out)!r} holds {what}; pass{hint} --force to delete it and start over"
         )
-    saved = json.loads((out / "config.json").read_text())
+    saved = with_added_settings(json.loads((out / "config.json").read_text()))
     wanted = json.loads(json.dumps(config.identity()))
     if saved != wanted:
         diff = sorted(_diff(saved, wanted))
