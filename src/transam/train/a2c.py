@@ -378,8 +378,9 @@ def make_update(
             adv = adv / stat.std
         else:
             targets = returns
+        adv_mean = adv.mean()  # ~0 when the critic is unbiased
         if a.normalize_advantages:
-            adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+            adv = (adv - adv_mean) / (adv.std() + 1e-8)
 
         def loss_fn(policy_params: Any, model_params: Any) -> tuple[jax.Array, Metrics]:
             if a.backprop_encoder and traj.partner is not None:
@@ -415,7 +416,7 @@ def make_update(
         model_params = optax.apply_updates(rs.model_params, upd)
         metrics["grad_norm/policy"] = optax.tree.norm(g_policy)
         metrics["grad_norm/model"] = optax.tree.norm(g_model)
-        metrics["advantage_mean"] = adv.mean()  # ~0 for an unbiased critic
+        metrics["advantage_mean"] = adv_mean
         metrics["episodes"] = traj.done.sum(dtype=jnp.int32)
         metrics["return_sum"] = traj.finished_return.sum()
         rs = dataclasses.replace(
