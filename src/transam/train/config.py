@@ -1,4 +1,4 @@
-"""Typed training configuration (the defaults are the spec's reference settings).
+"""Typed training configuration (defaults: the spec's reference settings plus the policy clock).
 
 Every setting is a field with a docstring, so ``transam train --help`` lists it. :meth:`validate`
 checks everything up front and raises one :class:`ConfigError` naming the bad value and the
