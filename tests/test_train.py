@@ -155,8 +155,9 @@ def _concat(trajs: list[Any]) -> Any:
 # ------------------------------------------------------------------ trainer internals
 
 
-def test_episode_boundaries_inside_rollouts_reset_every_carry() -> None:
-    env, model, cfg = ToyEnv(), Probe(), toy_config()
+@pytest.mark.parametrize("critic_z", [True, False])
+def test_episode_boundaries_inside_rollouts_reset_every_carry(critic_z: bool) -> None:
+    env, model, cfg = ToyEnv(), Probe(), toy_config(critic_z=critic_z)
     rollout = jax.jit(a2c.make_rollout(cfg, env, model))  # type: ignore[arg-type]
     rs = a2c.init_runner(cfg, env, model, jax.random.key(0))  # type: ignore[arg-type]
     policy = a2c.make_policy(cfg, env)  # type: ignore[arg-type]
@@ -278,6 +279,26 @@ def test_policy_clock_is_an_input_only_with_a_horizon() -> None:
     params = plain.init(jax.random.key(0), 2, 1)
     _, _, values = plain.step(params, plain.init_carry((2,)), x, z)
     assert float(values[0]) == float(values[1])
+
+
+def test_critic_without_z_has_its_own_trunk_and_ignores_z() -> None:
+    """``critic_z=False``: the value is a function of o_t (and the clock) only, the actor still
+    reads z; the default shares one trunk, so both read z."""
+    x = local_steps(jnp.ones((2, 2)), jnp.zeros((2,), jnp.int32), jnp.array([True, True]))
+    z = jnp.array([[0.0], [3.0]])  # same observation, different embeddings
+    for critic_z in (True, False):
+        policy = Policy(num_actions=3, hidden=8, critic_z=critic_z)
+        params = policy.init(jax.random.key(0), 2, 1)
+        names = set(params["params"])
+        _, logits, values = policy.step(params, policy.init_carry((2,)), x, z)
+        assert not np.allclose(logits[0], logits[1])
+        if critic_z:
+            assert names == {"lstm", "fc", "actor", "critic"}
+            assert abs(float(values[0] - values[1])) > 1e-6
+        else:
+            assert names == {"lstm", "fc", "lstm_critic", "fc_critic", "actor", "critic"}
+            assert policy.init_carry((2,))[0].shape == (2, 16)
+            assert float(values[0]) == float(values[1])
 
 
 # ------------------------------------------------------------------ whole runs (NAM on Spread)

@@ -27,11 +27,24 @@ LSTMCarry = tuple[jax.Array, jax.Array]
 """(cell state c, hidden state h), each [..., hidden]."""
 
 
+def _trunk(hidden: int, carry: LSTMCarry, x: jax.Array, suffix: str) -> tuple[LSTMCarry, jax.Array]:
+    """LSTM then Linear + ReLU (orthogonal init, gain sqrt 2)."""
+    carry, y = nn.OptimizedLSTMCell(hidden, name=f"lstm{suffix}")(carry, x)
+    fc = nn.Dense(hidden, kernel_init=nn.initializers.orthogonal(np.sqrt(2)), name=f"fc{suffix}")
+    return carry, nn.relu(fc(y))
+
+
 class ActorCriticLSTM(nn.Module):
-    """One step of the recurrent actor-critic on a batch of (o_t, z_t)."""
+    """One step of the recurrent actor-critic on a batch of (o_t, z_t).
+
+    ``critic_z`` (the reference): actor and critic heads share one trunk on (o_t, z_t).
+    Otherwise the critic has its own trunk on o_t alone, and the carry is the two trunks'
+    carries side by side ([..., 2 * hidden]).
+    """
 
     num_actions: int
     hidden: int = 128
+    critic_z: bool = True
 
     @nn.compact
     def __call__(
@@ -40,15 +53,25 @@ class ActorCriticLSTM(nn.Module):
         keep = ~first[..., None]
         carry = (jnp.where(keep, carry[0], 0.0), jnp.where(keep, carry[1], 0.0))
         x = jnp.concatenate([obs, z], axis=-1)
-        carry, y = nn.OptimizedLSTMCell(self.hidden, name="lstm")(carry, x)
+        if self.critic_z:
+            carry, h = _trunk(self.hidden, carry, x, "")
+            h_critic = h
+        else:
+            n = self.hidden
+            actor_carry, h = _trunk(self.hidden, (carry[0][..., :n], carry[1][..., :n]), x, "")
+            critic_carry, h_critic = _trunk(
+                self.hidden, (carry[0][..., n:], carry[1][..., n:]), obs, "_critic"
+            )
+            carry = (
+                jnp.concatenate([actor_carry[0], critic_carry[0]], axis=-1),
+                jnp.concatenate([actor_carry[1], critic_carry[1]], axis=-1),
+            )
         # Orthogonal init with the usual A2C gains: small actor head (near-uniform policy at
         # the start), unit critic head.
-        h = nn.Dense(self.hidden, kernel_init=nn.initializers.orthogonal(np.sqrt(2)), name="fc")(y)
-        h = nn.relu(h)
         logits = nn.Dense(
             self.num_actions, kernel_init=nn.initializers.orthogonal(0.01), name="actor"
         )(h)
-        value = nn.Dense(1, kernel_init=nn.initializers.orthogonal(1.0), name="critic")(h)
+        value = nn.Dense(1, kernel_init=nn.initializers.orthogonal(1.0), name="critic")(h_critic)
         return carry, logits, value[..., 0]
 
 
@@ -59,10 +82,11 @@ class Policy:
     num_actions: int
     hidden: int = 128
     horizon: int | None = None  # append t / horizon to the input (None: observation only)
+    critic_z: bool = True  # the critic reads z through the shared trunk (else its own, no z)
 
     @property
     def net(self) -> ActorCriticLSTM:
-        return ActorCriticLSTM(self.num_actions, self.hidden)
+        return ActorCriticLSTM(self.num_actions, self.hidden, self.critic_z)
 
     def init(self, key: jax.Array, obs_dim: int, z_dim: int) -> Params:
         """Fresh parameters for observations of width ``obs_dim`` and embeddings of ``z_dim``."""
@@ -85,7 +109,8 @@ class Policy:
 
     def init_carry(self, batch_shape: tuple[int, ...] = ()) -> LSTMCarry:
         """The all-zero carry (what ``first=True`` resets to)."""
-        zeros = jnp.zeros((*batch_shape, self.hidden), jnp.float32)
+        width = self.hidden if self.critic_z else 2 * self.hidden
+        zeros = jnp.zeros((*batch_shape, width), jnp.float32)
         return (zeros, zeros)
 
     def step(

@@ -123,7 +123,8 @@ def total_updates(config: TrainConfig) -> int:
 
 def make_policy(config: TrainConfig, env: ControlledEnv) -> Policy:
     horizon = env.spec.episode_len if config.a2c.time_feature else None
-    return Policy(num_actions=env.spec.num_actions, hidden=config.a2c.hidden, horizon=horizon)
+    a = config.a2c
+    return Policy(env.spec.num_actions, a.hidden, horizon=horizon, critic_z=a.critic_z)
 
 
 def make_optimizers(config: TrainConfig) -> tuple[optax.GradientTransformation, ...]:

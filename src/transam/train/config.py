@@ -72,6 +72,10 @@ class A2CConfig:
     """let the RL loss back-propagate into the agent model (reference: it does not)"""
     hidden: int = 128
     """LSTM and linear-layer width of the policy"""
+    critic_z: bool = True
+    """the critic reads the embedding z through the trunk it shares with the actor (the
+    reference). Off: the critic is its own LSTM on o_t (and the clock) only. On Spread, the
+    encoder methods' policies collapse early when the critic reads z (docs/results/README.md)"""
     time_feature: bool = True
     """append the agent's own clock t / episode_len to the policy input (actor and critic).
     The reference does not, and treats the time limit as terminal: its critic cannot tell the
@@ -194,7 +198,10 @@ class TrainConfig:
         return d
 
 
-ADDED_SETTINGS: dict[tuple[str, str], Any] = {("a2c", "time_feature"): False}
+ADDED_SETTINGS: dict[tuple[str, str], Any] = {
+    ("a2c", "time_feature"): False,
+    ("a2c", "critic_z"): True,
+}
 """Settings added after runs were first written, with the value that reproduces those runs."""
 
 
