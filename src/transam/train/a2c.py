@@ -122,8 +122,8 @@ def total_updates(config: TrainConfig) -> int:
 
 
 def make_policy(config: TrainConfig, env: ControlledEnv) -> Policy:
-    horizon = env.spec.episode_len if config.a2c.time_feature else None
     a = config.a2c
+    horizon = env.spec.episode_len if a.time_feature else None
     return Policy(env.spec.num_actions, a.hidden, horizon=horizon, critic_z=a.critic_z)
 
 

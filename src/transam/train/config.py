@@ -75,12 +75,13 @@ class A2CConfig:
     critic_z: bool = True
     """the critic reads the embedding z through the trunk it shares with the actor (the
     reference). Off: the critic is its own LSTM on o_t (and the clock) only. On Spread, the
-    encoder methods' policies collapse early when the critic reads z (docs/results/README.md)"""
+    encoder methods' policies collapse early when the critic reads z (docs/results/README.md,
+    "LIAM's policy collapses early")"""
     time_feature: bool = True
     """append the agent's own clock t / episode_len to the policy input (actor and critic).
     The reference does not, and treats the time limit as terminal: its critic cannot tell the
     last steps of an episode from the first and overestimates the future there, which biases
-    every end-of-episode advantage (see docs/results/README.md, "NAM on Spread")"""
+    every end-of-episode advantage (docs/results/README.md, "The end-of-episode critic bias")"""
 
 
 @dataclass(frozen=True)
