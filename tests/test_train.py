@@ -246,9 +246,8 @@ def test_losses_finite_and_backprop_flag_controls_encoder_grads(backprop: bool) 
 
 
 def local_steps(obs: jax.Array, t: jax.Array, first: jax.Array) -> LocalStep:
-    n = obs.shape[0]
-    zeros = jnp.zeros((n,), jnp.int32)
-    return LocalStep(obs, zeros, zeros.astype(jnp.float32), t, first)
+    """The trainer's fresh-episode LocalStep with the clock and ``first`` set as given."""
+    return a2c.first_step(obs).replace(t=t, first=first)
 
 
 def test_policy_resets_its_lstm_carry_at_first() -> None:

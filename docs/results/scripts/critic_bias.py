@@ -15,19 +15,16 @@ import dataclasses
 import jax
 import numpy as np
 
-from transam import envs
-from transam.models import make_model
-from transam.train.a2c import init_runner, make_update
-from transam.train.config import TrainConfig
+from transam.train.a2c import init_runner, make_update, steps_per_update
+from transam.train.config import A2CConfig, TrainConfig
+from transam.train.loop import env_and_model
 
 
 def advantage_by_phase(time_feature: bool, updates: int, seed: int) -> np.ndarray:
-    config = TrainConfig(env="spread", method="nam", partners="heuristic", total_steps=updates * 50)
-    config = dataclasses.replace(
-        config, a2c=dataclasses.replace(config.a2c, time_feature=time_feature)
-    )
-    env = envs.make("spread", partners="heuristic")
-    model = make_model("nam", env.spec, config.model, config.baseline)
+    a2c = A2CConfig(time_feature=time_feature)
+    config = TrainConfig(env="spread", method="nam", partners="heuristic", a2c=a2c)
+    config = dataclasses.replace(config, total_steps=updates * steps_per_update(config))
+    env, model = env_and_model(config)
     update = make_update(config, env, model)
     run = jax.jit(lambda rs: jax.lax.scan(lambda s, _: update(s), rs, None, length=updates))
     _, metrics = run(init_runner(config, env, model, jax.random.key(seed)))
