@@ -29,7 +29,7 @@ from transam.models.transam import TransAMConfig
 from transam.train import a2c
 from transam.train.config import A2CConfig, ConfigError, EvalConfig, TrainConfig
 from transam.train.evaluate import make_evaluate
-from transam.train.loop import RunDirError, read_metrics, train, uniform_policy_eval
+from transam.train.loop import RunDirError, _flag, read_metrics, train, uniform_policy_eval
 
 # ------------------------------------------------------------------ toy environment and probe
 
@@ -376,13 +376,27 @@ def test_kill_and_resume_gives_identical_metrics(
     with pytest.raises(RunDirError, match=r"finished run.*--force"):
         train(cfg)
     assert train(dataclasses.replace(cfg, resume=True)).finished
-    with pytest.raises(RunDirError, match=r"settings differ.*seed"):
+    with pytest.raises(
+        RunDirError,
+        match=rf"settings differ.*seed \(run: {cfg.seed}, now: 3; "
+        rf"the run's flag: --seed {cfg.seed}\)",
+    ):
         train(dataclasses.replace(cfg, resume=True, seed=3))
+    clockless = dataclasses.replace(cfg.a2c, time_feature=False)
+    with pytest.raises(RunDirError, match=r"a2c.time_feature .*the run's flag: --a2c.time-feature"):
+        train(dataclasses.replace(cfg, resume=True, a2c=clockless))
     with pytest.raises(RunDirError, match=r"no run in --out"):
         train(dataclasses.replace(cfg, out=str(tmp_path / "nothing"), resume=True))
     assert not (tmp_path / "nothing").exists()
     assert train(dataclasses.replace(cfg, total_steps=CHUNK_STEPS, force=True)).finished
     assert read_metrics(tmp_path / "run" / "metrics.jsonl") == records[:1]
+
+
+def test_resume_errors_name_the_flag_that_gives_the_runs_value() -> None:
+    assert _flag("a2c.time_feature", False) == "--a2c.no-time-feature"
+    assert _flag("a2c.critic_z", True) == "--a2c.critic-z"
+    assert _flag("total_steps", 300) == "--total-steps 300"
+    assert _flag("a2c.ent_coef", 0.02) == "--a2c.ent-coef 0.02"
 
 
 def test_sequential_seeds_write_per_seed_directories(

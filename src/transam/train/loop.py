@@ -253,7 +253,17 @@ def _diff(a: Any, b: Any, prefix: str = "") -> Iterator[str]:
         for k in sorted(set(a) | set(b)):
             yield from _diff(a.get(k), b.get(k), f"{prefix}{k}.")
     elif a != b:
-        yield f"{prefix.rstrip('.')} (run: {a!r}, now: {b!r})"
+        name = prefix.rstrip(".")
+        yield f"{name} (run: {a!r}, now: {b!r}; the run's flag: {_flag(name, a)})"
+
+
+def _flag(name: str, value: Any) -> str:
+    """The command-line flag that sets setting ``name`` (e.g. 'a2c.time_feature') to ``value``."""
+    flag = "--" + name.replace("_", "-")
+    if isinstance(value, bool):
+        group, _, leaf = flag.rpartition(".")
+        return flag if value else (f"{group}.no-{leaf}" if group else f"--no-{leaf[2:]}")
+    return f"{flag} {value}"
 
 
 def _clean(out: Path) -> None:
