@@ -94,6 +94,18 @@ def test_trained_members_beat_random(env: str) -> None:
         assert m["self_play_return"] > rnd, (m["name"], m["self_play_return"], rnd)
 
 
+@pytest.mark.parametrize("split", learned.SPLITS)
+def test_learned_predators_reach_the_prey_more_often_than_random_ones(split: str) -> None:
+    """Tag's unshaped objective: steps per episode with a predator within the capture distance,
+    every slot one learned member, against the prey stand-in it trained with."""
+    entry = learned.load_manifest("tag")[split]
+    members = learned.learned_members("tag", split)
+    touches = learned.measure_members("tag", entry["members"], members, 128, "touches", True)
+    for m in entry["members"]:
+        rnd = touches[f"random/{m['stand_in']}"]
+        assert touches[m["name"]] > 1.3 * rnd, (m["name"], touches[m["name"]], rnd)
+
+
 def test_partner_training_is_deterministic() -> None:
     view = learned.joint_view("lbf")
     cfg = PPOConfig(total_steps=16, num_envs=2, rollout_len=8, epochs=1, minibatches=1, hidden=8)

@@ -281,13 +281,17 @@ def predator_reward(state: State) -> jax.Array:
     return predator_capture_reward(state) - 0.1 * jnp.sum(d)
 
 
-def joint_view(config: Config, prey: PolicyFn) -> JointView:
+def joint_view(config: Config, prey: PolicyFn, score: str = "shaped") -> JointView:
     """The three predators as learners; ``prey`` (a stand-in) plays the controlled agent.
 
-    Every predator gets LIAM's shared predator reward (with the distance shaping) to train on
-    and is scored by it too: the capture term alone (-1 for a lone catch, +1 for a joint one)
-    is too sparse to separate short-trained predators from random ones.
+    Every predator gets LIAM's shared predator reward (with the distance shaping) to train on.
+    ``score="shaped"`` scores them by it too: the capture term alone (-1 for a lone catch, +1 for
+    a joint one) is too sparse to separate short-trained predators from random ones.
+    ``score="touches"`` scores 1 per step with at least one predator within the capture
+    distance of the prey: how often the team reaches the prey, whatever the shaping.
     """
+    if score not in ("shaped", "touches"):
+        raise ValueError(f"unknown Tag score {score!r}; valid choices: shaped, touches")
     game = TagGame(config)
 
     def observe(state: State) -> jax.Array:
@@ -302,7 +306,8 @@ def joint_view(config: Config, prey: PolicyFn) -> JointView:
         nxt, _, term = game.transition(k_step, state, prey_action, actions)
         ones = jnp.ones(NUM_PREDATORS, jnp.float32)
         r = ones * predator_reward(nxt)
-        return nxt, r, r, term
+        touch = ones * (num_captures(nxt) >= 1)
+        return nxt, r, r if score == "shaped" else touch, term
 
     return JointView(
         name="tag",

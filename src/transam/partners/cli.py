@@ -57,17 +57,29 @@ class PartnersShow:
 
     env: tyro.conf.Positional[EnvName]
     heldout: bool = False
+    episodes: int = 128  # episodes per measured number
 
     def run(self) -> None:
         from transam.partners import learned
 
+        if self.episodes < 1:
+            raise SystemExit(f"error: --episodes must be at least 1, got {self.episodes}")
         split = _split(self.heldout)
         entry = learned.load_manifest(self.env)[split]
         members = learned.learned_members(self.env, split)
-        measured = _measure(self.env, entry["members"], members)
+        measured = learned.measure_members(self.env, entry["members"], members, self.episodes)
+        # Tag: also how often each team of three reaches the prey, and random predators' rate.
+        touches = (
+            learned.measure_members(
+                self.env, entry["members"], members, self.episodes, "touches", True
+            )
+            if self.env == "tag"
+            else {}
+        )
         table = Table(title=f"{self.env} {split} learned partners")
         cols = ("member", "kind", "recipe", "seed", "shaping", "gamma", "steps", "self-play")
-        for c in (*cols, "measured"):
+        extra = ("touches",) if touches else ()
+        for c in (*cols, "measured", *extra):
             table.add_column(c, justify="left" if c in ("member", "recipe") else "right")
         for m in entry["members"]:
             table.add_row(
@@ -80,38 +92,22 @@ class PartnersShow:
                 f"{m['steps']:,}",
                 f"{m['self_play_return']:.3f}",
                 f"{measured[m['name']]:.3f}",
+                *([f"{touches[m['name']]:.2f}"] if extra else []),
             )
         console.print(table)
         console.print(f"random play: {entry['random_return']}")
+        if extra:
+            rnd = {k.split("/")[1]: round(v, 2) for k, v in touches.items() if "/" in k}
+            console.print(
+                f"touches: steps per episode with a predator within the capture distance of "
+                f"the prey; random predators: {rnd}"
+            )
         if entry["teams"]:
             console.print("teams: " + ", ".join(t["name"] for t in entry["teams"]))
         console.print(
             "self-play: the member's training run (manifest); measured: every learner slot "
-            "played by this member, against the run's stand-in (16 episodes)"
+            f"played by this member, against the run's stand-in ({self.episodes} episodes)"
         )
-
-
-def _measure(env: str, rows: list[dict], members: dict) -> dict[str, float]:
-    """Mean score with every learner slot played by one member (one program per stand-in)."""
-    import jax
-    import jax.numpy as jnp
-
-    from transam.partners import learned
-    from transam.partners.joint import play
-
-    out: dict[str, float] = {}
-    for stand_in in sorted({m["stand_in"] for m in rows}):
-        names = [m["name"] for m in rows if m["stand_in"] == stand_in]
-        acts = [members[n].act for n in names]
-        view = learned.joint_view(env, stand_in)
-
-        def score(idx: jax.Array, acts: list = acts, view: learned.JointView = view) -> jax.Array:
-            pol = lambda k, o: jax.lax.switch(idx, acts, k, o)
-            return jnp.mean(play(view, [pol] * view.num_agents, jax.random.PRNGKey(1), 16)[0])
-
-        vals = jax.jit(jax.vmap(score))(jnp.arange(len(names)))
-        out.update({n: float(v) for n, v in zip(names, vals, strict=True)})
-    return out
 
 
 @dataclass

@@ -34,13 +34,17 @@ def data_dir(env: str) -> Path:
     return Path(str(resources.files("transam.partners"))) / "data" / env
 
 
-def joint_view(env: str, stand_in: str = "self-play") -> JointView:
-    """The training view of ``env`` with its default config (Tag: the named prey stand-in)."""
+def joint_view(env: str, stand_in: str = "self-play", tag_score: str = "shaped") -> JointView:
+    """The training view of ``env`` with its default config (Tag: the named prey stand-in,
+    scored by ``tag_score``, see :func:`transam.envs.tag.joint_view`)."""
     if env == "tag":
         from transam.envs import tag
-        from transam.partners.tag import flee_prey, random_prey
+        from transam.partners.tag import PREY_STAND_INS
 
-        return tag.joint_view(tag.Config(), flee_prey if stand_in == "flee" else random_prey)
+        if stand_in not in PREY_STAND_INS:
+            valid = ", ".join(PREY_STAND_INS)
+            raise ValueError(f"unknown Tag prey stand-in {stand_in!r}; valid choices: {valid}")
+        return tag.joint_view(tag.Config(), PREY_STAND_INS[stand_in], tag_score)
     if env == "spread":
         from transam.envs import spread
 
@@ -70,6 +74,35 @@ def evaluate(
     """Mean episode score per learner over EVAL_EPISODES episodes (jitted)."""
     fn = jax.jit(lambda k: play(view, policies, k, EVAL_EPISODES, weights)[0])
     return np.asarray(fn(jax.random.PRNGKey(seed)))
+
+
+def measure_members(
+    env: str,
+    rows: list[dict],
+    members: dict,
+    episodes: int,
+    tag_score: str = "shaped",
+    with_random: bool = False,
+) -> dict[str, float]:
+    """Mean score with every learner slot played by one member (one program per stand-in);
+    ``with_random`` adds uniformly random players as ``random/<stand-in>``."""
+    out: dict[str, float] = {}
+    for stand_in in sorted({m["stand_in"] for m in rows}):
+        names = [m["name"] for m in rows if m["stand_in"] == stand_in]
+        acts = [members[n].act for n in names]
+        view = joint_view(env, stand_in, tag_score)
+        if with_random:
+            names.append(f"random/{stand_in}")
+            acts.append(random_policy(view.num_actions))
+
+        def score(idx: jax.Array, acts: list = acts, view: JointView = view) -> jax.Array:
+            pol = lambda k, o: jax.lax.switch(idx, acts, k, o)
+            key = jax.random.PRNGKey(1)
+            return jnp.mean(play(view, [pol] * view.num_agents, key, episodes)[0])
+
+        vals = jax.jit(jax.vmap(score))(jnp.arange(len(names)))
+        out.update({n: float(v) for n, v in zip(names, vals, strict=True)})
+    return out
 
 
 def train_recipe(recipe: Recipe, log: Any = print) -> tuple[dict[str, np.ndarray], dict]:

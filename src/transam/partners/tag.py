@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 
 from transam.partners.moves import DOWN, LEFT, RIGHT, UP, move_toward
-from transam.partners.population import Member, Population, Team
+from transam.partners.population import Member, PolicyFn, Population, Team
 
 if TYPE_CHECKING:
     from transam.envs.tag import Config
@@ -90,6 +90,9 @@ def random_prey(key: jax.Array, obs: jax.Array) -> jax.Array:
     del obs
     return jax.random.randint(key, (), 0, 5, dtype=jnp.int32)
 
+
+PREY_STAND_INS: dict[str, PolicyFn] = {"flee": flee_prey, "random": random_prey}
+"""The prey stand-ins the learned predators train against, by recipe name."""
 
 HEURISTICS: tuple[Member, ...] = (
     Member("after_prey", after_prey),
