@@ -121,14 +121,15 @@ def test_config_round_trip_and_multi_seed_dirs(run_dir: Path, tmp_path: Path) ->
     write_json(multi / "config.json", {**saved, "colour": "red"})
     with pytest.raises(ConfigError, match="unknown setting"):
         load_run_config(multi)
-    # A run written before the policy clock existed loads without it (its checkpoints hold
-    # the clock-less policy); one that names it keeps its value.
+    # A run written before the policy clock and the z-free critic existed loads without
+    # either (its checkpoints hold the reference policy); one that names them keeps its values.
     old = tmp_path / "old"
     old.mkdir()
-    a2c = {k: v for k, v in saved["a2c"].items() if k != "time_feature"}
+    a2c = {k: v for k, v in saved["a2c"].items() if k not in ("time_feature", "critic_z")}
     write_json(old / "config.json", {**saved, "a2c": a2c})
     assert load_run_config(old).a2c.time_feature is False
-    assert cfg.a2c.time_feature is True
+    assert load_run_config(old).a2c.critic_z is True
+    assert (cfg.a2c.time_feature, cfg.a2c.critic_z) == (True, False)
 
 
 # ------------------------------------------------------------------ the evaluation of a run

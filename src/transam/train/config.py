@@ -72,11 +72,12 @@ class A2CConfig:
     """let the RL loss back-propagate into the agent model (reference: it does not)"""
     hidden: int = 128
     """LSTM and linear-layer width of the policy"""
-    critic_z: bool = True
+    critic_z: bool = False
     """the critic reads the embedding z through the trunk it shares with the actor (the
-    reference). Off: the critic is its own LSTM on o_t (and the clock) only. On Spread, the
-    encoder methods' policies collapse early when the critic reads z (docs/results/README.md,
-    "LIAM's policy collapses early")"""
+    reference, the paper's V(o, E^o)). Off (default): the critic is its own LSTM on o_t (and
+    the clock) only; the actor still conditions on z. With the reference's shared trunk the
+    encoder methods' policies collapse early on Spread, below random play; with the critic on
+    its own they do not (docs/results/README.md, "The encoder methods' early collapse")"""
     time_feature: bool = True
     """append the agent's own clock t / episode_len to the policy input (actor and critic).
     The reference does not, and treats the time limit as terminal: its critic cannot tell the
