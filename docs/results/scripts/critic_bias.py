@@ -1,6 +1,7 @@
 """The end-of-episode critic bias, with and without the policy's clock (docs/results/README.md).
 
-Trains NAM on Spread against the heuristic partners with the reference A2C settings for
+Trains NAM on Spread against the heuristic partners with the reference A2C settings (shared
+actor-critic trunk; only the clock varies) for
 ``--updates`` updates and prints the mean advantage (in units of the return std) of each
 update's position inside the 25-step episode: the 10 environments run in lock step, so update
 k of an episode always covers its steps 5k .. 5k+4. An unbiased critic gives about 0 at every
@@ -21,7 +22,7 @@ from transam.train.loop import env_and_model
 
 
 def advantage_by_phase(time_feature: bool, updates: int, seed: int) -> np.ndarray:
-    a2c = A2CConfig(time_feature=time_feature)
+    a2c = A2CConfig(time_feature=time_feature, critic_z=True)  # the reference's shared trunk
     config = TrainConfig(env="spread", method="nam", partners="heuristic", a2c=a2c)
     config = dataclasses.replace(config, total_steps=updates * steps_per_update(config))
     env, model = env_and_model(config)
