@@ -282,7 +282,7 @@ def test_policy_clock_is_an_input_only_with_a_horizon() -> None:
 
 def test_critic_without_z_has_its_own_trunk_and_ignores_z() -> None:
     """``critic_z=False``: the value is a function of o_t (and the clock) only, the actor still
-    reads z; the default shares one trunk, so both read z."""
+    reads z; with ``critic_z=True`` (the reference) they share one trunk, so both read z."""
     x = local_steps(jnp.ones((2, 2)), jnp.zeros((2,), jnp.int32), jnp.array([True, True]))
     z = jnp.array([[0.0], [3.0]])  # same observation, different embeddings
     for critic_z in (True, False):

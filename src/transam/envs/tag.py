@@ -306,8 +306,9 @@ def joint_view(config: Config, prey: PolicyFn, score: str = "shaped") -> JointVi
         nxt, _, term = game.transition(k_step, state, prey_action, actions)
         ones = jnp.ones(NUM_PREDATORS, jnp.float32)
         r = ones * predator_reward(nxt)
-        touch = ones * (num_captures(nxt) >= 1)
-        return nxt, r, r if score == "shaped" else touch, term
+        if score == "touches":
+            return nxt, r, ones * (num_captures(nxt) >= 1), term
+        return nxt, r, r, term
 
     return JointView(
         name="tag",

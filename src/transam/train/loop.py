@@ -259,11 +259,11 @@ def _diff(a: Any, b: Any, prefix: str = "") -> Iterator[str]:
 
 def _flag(name: str, value: Any) -> str:
     """The command-line flag that sets setting ``name`` (e.g. 'a2c.time_feature') to ``value``."""
-    flag = "--" + name.replace("_", "-")
-    if isinstance(value, bool):
-        group, _, leaf = flag.rpartition(".")
-        return flag if value else (f"{group}.no-{leaf}" if group else f"--no-{leaf[2:]}")
-    return f"{flag} {value}"
+    group, _, leaf = name.rpartition(".")
+    if value is False:
+        leaf = f"no_{leaf}"  # tyro's negated boolean flag
+    flag = "--" + ".".join(filter(None, (group, leaf))).replace("_", "-")
+    return flag if isinstance(value, bool) else f"{flag} {value}"
 
 
 def _clean(out: Path) -> None:
