@@ -28,6 +28,7 @@ from transam.evaluation import (
     population_for,
     stratified_split,
 )
+from transam.partners import learned
 from transam.train.config import ConfigError
 from transam.train.loop import read_metrics, write_json
 
@@ -158,6 +159,8 @@ def test_result_schema_and_files(run_dir: Path, result: dict[str, Any]) -> None:
     assert probe["features"] == "embedding z_t (dim 128)"
     assert len(result["pca"]["explained_variance"]) == 2
     assert result["notes"] == []
+    assert result["population_digest"] == result["trained_population_digest"]
+    assert result["population_digest"] == learned.digest("spread")
 
     path = evaluation_path(run_dir, "train")
     assert json.loads(path.read_text()) == result
@@ -185,10 +188,21 @@ def test_heldout_partners(run_dir: Path, result: dict[str, Any]) -> None:
         "default",
     )
     assert held["population_name"] == "spread-heldout"
+    assert held["population_digest"] == learned.digest("spread", "heldout")
+    assert held["trained_population_digest"] == learned.digest("spread")
     teams = envs.make("spread", partners="heldout").population.team_names
     assert list(held["per_partner_return"]) == list(teams)
     assert evaluation_path(run_dir, "heldout").exists()
     assert json.loads(evaluation_path(run_dir, "train").read_text()) == result  # untouched
+
+
+def test_a_changed_population_is_noted(run_dir: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "run"
+    shutil.copytree(run_dir, copy)
+    write_json(copy / "partners.json", {"env": "spread", "partners": "default", "digest": "0"})
+    noted = evaluate_run(copy, episodes=EPISODES)
+    assert noted["trained_population_digest"] == "0"
+    assert any("trained against population 0" in n for n in noted["notes"]), noted["notes"]
 
 
 def test_named_checkpoint_and_bad_names(run_dir: Path, tmp_path: Path) -> None:

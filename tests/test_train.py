@@ -370,6 +370,14 @@ def test_kill_and_resume_gives_identical_metrics(
     assert len(read_metrics(tmp_path / "run" / "metrics.jsonl")) == 3
     with pytest.raises(RunDirError, match=r"unfinished run.*--resume"):
         train(cfg)
+    # The run records its population; resuming against another one is refused.
+    pop = tmp_path / "run" / "partners.json"
+    assert json.loads(pop.read_text()) == {"env": "spread", "partners": "heuristic", "digest": None}
+    recorded = pop.read_text()
+    pop.write_text(json.dumps({"env": "spread", "partners": "heuristic", "digest": "0" * 16}))
+    with pytest.raises(RunDirError, match=r"population 'heuristic' changed.*run: 0{16}, now: None"):
+        train(dataclasses.replace(cfg, resume=True))
+    pop.write_text(recorded)
     assert train(dataclasses.replace(cfg, resume=True)).finished
     assert read_metrics(tmp_path / "run" / "metrics.jsonl") == records[:4]
     # A finished run is never overwritten without --force; --resume just reports it.

@@ -26,7 +26,9 @@ step. NAM has no learned embedding (its z is the one-hot previous action), so it
 the Oracle's z contains the other agents' observations (privileged), which the JSON notes.
 
 JSON: ``env``, ``method``, ``seed``, ``partners`` ("train"|"heldout"), ``population`` (the
-partner choice it mapped to), ``population_name``, ``trained_partners``, ``checkpoint`` (path
+partner choice it mapped to), ``population_name``, ``trained_partners``, ``population_digest``
+and ``trained_population_digest`` (the shipped population's fingerprint now and the run's
+partners.json's; None for scripted partners or runs older than that file), ``checkpoint`` (path
 relative to the run directory), ``step``, ``episodes``, ``greedy``, ``return`` {mean, std},
 ``action_accuracy`` and ``obs_mse`` (only where the model predicts them),
 ``per_partner_return`` {team: mean}, ``per_step`` {cum_return, action_accuracy?, obs_mse?},
@@ -279,8 +281,15 @@ def evaluate_run(
 ) -> dict[str, Any]:
     """Evaluate a run's checkpoint on ``episodes`` episodes with its training partners or
     held-out ones; write eval_{partners}.json/.png/_pca.npz and return the JSON's contents."""
+    from transam.partners.learned import population_digest
     from transam.train.a2c import steps_per_update
-    from transam.train.loop import _program_key, env_and_model, write_atomic, write_json
+    from transam.train.loop import (
+        POPULATION_FILE,
+        _program_key,
+        env_and_model,
+        write_atomic,
+        write_json,
+    )
 
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 2:
         raise ConfigError(f"episodes must be an integer >= 2, got {episodes!r}")
@@ -314,6 +323,17 @@ def evaluate_run(
             f"the run trained with partners={config.partners!r}; 'heldout' means the "
             f"{population!r} population here"
         )
+    digest = population_digest(config.env, population)
+    trained_with = top / POPULATION_FILE
+    trained_digest = (
+        json.loads(trained_with.read_text())["digest"] if trained_with.exists() else None
+    )
+    if partners == "train" and trained_with.exists() and trained_digest != digest:
+        notes.append(
+            f"the run trained against population {trained_digest}; the shipped "
+            f"{population!r} population is now {digest}: returns are not comparable with "
+            "its training curve"
+        )
     out: dict[str, Any] = {
         "env": config.env,
         "method": config.method,
@@ -322,6 +342,8 @@ def evaluate_run(
         "population": population,
         "population_name": env.population.name,
         "trained_partners": config.partners,
+        "population_digest": digest,
+        "trained_population_digest": trained_digest,
         "checkpoint": ckpt.relative_to(run_dir).as_posix(),
         "step": int(state.update) * steps_per_update(config),
         "episodes": episodes,

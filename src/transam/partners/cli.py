@@ -46,8 +46,10 @@ class PartnersTrain:
         t0 = time.time()
         tensors, entry = learned.train_recipe(r, log=console.print)
         path = learned.save(self.env, r.split, tensors, entry, root=self.out)
+        digest = learned.digest(self.env, r.split, root=self.out)
         console.print(
-            f"trained {len(entry['members'])} members in {time.time() - t0:.1f}s -> {path}"
+            f"trained {len(entry['members'])} members in {time.time() - t0:.1f}s -> {path} "
+            f"(digest {digest})"
         )
 
 
@@ -76,7 +78,8 @@ class PartnersShow:
             if self.env == "tag"
             else {}
         )
-        table = Table(title=f"{self.env} {split} learned partners")
+        digest = learned.digest(self.env, split)
+        table = Table(title=f"{self.env} {split} learned partners (digest {digest})")
         cols = ("member", "kind", "recipe", "seed", "shaping", "gamma", "steps", "self-play")
         extra = ("touches",) if touches else ()
         for c in (*cols, "measured", *extra):

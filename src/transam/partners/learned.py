@@ -8,6 +8,7 @@ as ``<member>/<param path>`` tensors. Loading reads these files only: no network
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from importlib import resources
@@ -244,6 +245,23 @@ def load_params(env: str, split: str = "default", root: Path | None = None) -> d
         name, path = key.split("/", 1)
         by_member.setdefault(name, {})[path] = arr
     return {n: unflatten_dict(p, sep="/") for n, p in by_member.items()}
+
+
+def digest(env: str, split: str = "default", root: Path | None = None) -> str:
+    """A short fingerprint of what ``split``'s shipped population plays (its weights and team
+    table, not the manifest's measurements): runs record it, so a retrained population is never
+    mixed up with the one a run trained against."""
+    d = root or data_dir(env)
+    entry = load_manifest(env, root)[split]
+    h = hashlib.sha256((d / f"{split}.safetensors").read_bytes())
+    h.update(json.dumps(entry["teams"], sort_keys=True).encode())
+    return h.hexdigest()[:16]
+
+
+def population_digest(env: str, partners: str) -> str | None:
+    """:func:`digest` of the population ``envs.make(env, partners=partners)`` plays; None for
+    the scripted ``"heuristic"`` one (code, not data)."""
+    return None if partners == "heuristic" else digest(env, partners)
 
 
 def learned_members(

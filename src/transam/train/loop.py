@@ -3,6 +3,7 @@
 Run directory (``--out``)::
 
     config.json            the run's settings (written once, atomically)
+    partners.json          which shipped partner population it trains against (its digest)
     final.json             written last: the run is finished (its final evaluation per seed)
     metrics.jsonl          one JSON object per chunk (= per evaluation point)
     tb/                    TensorBoard event files (same scalars, plus steps/s)
@@ -55,7 +56,8 @@ from transam.train.config import ConfigError, TrainConfig, with_added_settings
 from transam.train.evaluate import make_evaluate
 
 KEEP_CHECKPOINTS = 2
-OWN_ENTRIES = ("config.json", "final.json", "metrics.jsonl", "tb", "checkpoints")
+POPULATION_FILE = "partners.json"
+OWN_ENTRIES = ("config.json", POPULATION_FILE, "final.json", "metrics.jsonl", "tb", "checkpoints")
 
 
 @dataclass(frozen=True)
@@ -245,7 +247,33 @@ def prepare_run_dir(config: TrainConfig) -> str:
             f"--resume: settings differ from the run in {str(out)!r}: {', '.join(diff)} "
             "(resume with the same settings, or --force to start over)"
         )
+    if not finished:
+        _check_population(out, config)
     return "finished" if finished else "resume"
+
+
+def population_record(config: TrainConfig) -> dict[str, Any]:
+    """What partners.json says: the environment, the partner choice and the population's
+    digest (None for the scripted population)."""
+    from transam.partners.learned import population_digest
+
+    digest = population_digest(config.env, config.partners)
+    return {"env": config.env, "partners": config.partners, "digest": digest}
+
+
+def _check_population(out: Path, config: TrainConfig) -> None:
+    """Refuse to resume against a different shipped population than the run started with
+    (runs written before partners.json existed are not checked: nothing says what they used)."""
+    path = out / POPULATION_FILE
+    if not path.exists():
+        return
+    was, now = json.loads(path.read_text())["digest"], population_record(config)["digest"]
+    if was != now:
+        raise RunDirError(
+            f"--resume: the shipped {config.env} partner population {config.partners!r} "
+            f"changed since the run in {str(out)!r} started (run: {was}, now: {now}); finish "
+            "it with the transam version it started with, or --force to start over"
+        )
 
 
 def _diff(a: Any, b: Any, prefix: str = "") -> Iterator[str]:
@@ -401,6 +429,7 @@ def train(config: TrainConfig, stop_after_chunks: int | None = None) -> RunResul
     if action == "fresh" or not (out / "config.json").exists():
         out.mkdir(parents=True, exist_ok=True)
         write_json(out / "config.json", config.identity())
+        write_json(out / POPULATION_FILE, population_record(config))
     for d in dirs:
         d.mkdir(parents=True, exist_ok=True)
 
