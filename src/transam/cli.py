@@ -199,8 +199,8 @@ class Envs:
 @dataclass(frozen=True)
 class Train(TrainConfig):
     """Train one controlled agent with A2C and an agent model against the environment's partner
-    population; writes config.json, metrics.jsonl, checkpoints and TensorBoard files to --out.
-    Steps are controlled-agent steps summed over parallel environments."""
+    population; writes config.json, partners.json, metrics.jsonl, checkpoints and TensorBoard
+    files to --out. Steps are controlled-agent steps summed over parallel environments."""
 
     def run(self) -> None:
         _run_train(TrainConfig(**{f.name: getattr(self, f.name) for f in fields(TrainConfig)}))
@@ -335,8 +335,8 @@ def _run_train(config: TrainConfig) -> bool:
         )
     console.print(table)
     console.print(
-        f"outputs in {result.run_dir}/: config.json, final.json, metrics.jsonl, checkpoints/, "
-        "tb/ (per seed in seed_S/ when --num-seeds > 1)"
+        f"outputs in {result.run_dir}/: config.json, partners.json, final.json, metrics.jsonl, "
+        "checkpoints/, tb/ (per seed in seed_S/ when --num-seeds > 1)"
     )
     return True
 
