@@ -126,7 +126,7 @@ def test_recipe_training_is_deterministic_and_the_digest_tracks_the_weights(
 ) -> None:
     """The whole `partners train` path on a one-member recipe: the same weights and manifest
     twice (bar wall-clock), loadable from where they were saved, and a fingerprint that
-    changes when the weights do."""
+    changes when the weights do (and drops the old diversity measurement)."""
     tiny = PPOConfig(total_steps=16, num_envs=2, rollout_len=8, epochs=1, minibatches=1, hidden=8)
     rec = Recipe(
         "lbf",
@@ -146,5 +146,9 @@ def test_recipe_training_is_deterministic_and_the_digest_tracks_the_weights(
     assert set(learned.learned_members("lbf", root=tmp_path)) == {"m"}
     before = learned.digest("lbf", root=tmp_path)
     assert before == learned.digest("lbf", root=tmp_path)
+    learned.record_diversity("lbf", "default", {"others": 0.5}, root=tmp_path)
+    assert learned.load_manifest("lbf", tmp_path)["default"]["diversity"] == {"others": 0.5}
+    assert learned.digest("lbf", root=tmp_path) == before  # measurements are not the population
     learned.save("lbf", "default", {k: v + 1e-3 for k, v in t1.items()}, e1, root=tmp_path)
     assert learned.digest("lbf", root=tmp_path) != before
+    assert "diversity" not in learned.load_manifest("lbf", tmp_path)["default"]  # stale: dropped

@@ -120,6 +120,7 @@ class PartnersDiversity:
     env: tyro.conf.Positional[EnvName]
     heldout: bool = False
     window: int = 10  # steps per classifier sample
+    record: bool = False  # store the accuracies in the shipped manifest (the README quotes it)
 
     def run(self) -> None:
         from transam import envs
@@ -148,6 +149,20 @@ class PartnersDiversity:
             f"{acc['local']:.3f}, "
             f"chance {acc['chance']:.3f} ({acc['teams']} teams, window {self.window})"
         )
+        if self.record:
+            found = {
+                "partner_id_accuracy_others": round(acc["others"], 3),
+                "partner_id_accuracy_local": round(acc["local"], 3),
+                "chance": round(acc["chance"], 4),
+                "teams": acc["teams"],
+                "window": self.window,
+                "episodes_per_team": ClassifierConfig().episodes_per_team,
+                "measured_by": f"transam partners diversity {self.env}"
+                + (" --heldout" if self.heldout else ""),
+                "population_digest": learned.digest(self.env, split),
+            }
+            learned.record_diversity(self.env, split, found)
+            console.print(f"recorded in {learned.data_dir(self.env) / 'manifest.json'}")
 
 
 @dataclass

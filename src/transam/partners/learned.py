@@ -202,10 +202,25 @@ def rescore(env: str, split: str = "default", root: Path | None = None) -> dict:
             rnd = evaluate(view, [random_policy(view.num_actions)] * view.num_agents)
             entry["random_return"][m["stand_in"]] = [round(float(x), 4) for x in rnd]
             done.add(m["stand_in"])
-    (root or data_dir(env)).joinpath("manifest.json").write_text(
-        json.dumps(manifest, indent=1, sort_keys=True) + "\n"
-    )
+    write_manifest(env, manifest, root)
     return entry
+
+
+def write_manifest(env: str, manifest: dict, root: Path | None = None) -> Path:
+    """Replace ``env``'s manifest atomically (temp file, then rename)."""
+    path = (root or data_dir(env)) / "manifest.json"
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
+    tmp.replace(path)
+    return path
+
+
+def record_diversity(env: str, split: str, found: dict, root: Path | None = None) -> None:
+    """Store a ``transam partners diversity`` measurement in ``split``'s manifest entry (a
+    retrained split drops it: :func:`save` writes a fresh entry)."""
+    manifest = load_manifest(env, root)
+    manifest[split]["diversity"] = found
+    write_manifest(env, manifest, root)
 
 
 def save(
@@ -222,10 +237,7 @@ def save(
     path = d / "manifest.json"
     manifest = json.loads(path.read_text()) if path.exists() else {"env": env}
     manifest[split] = entry
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
-    tmp.replace(path)
-    return path
+    return write_manifest(env, manifest, root)
 
 
 def load_manifest(env: str, root: Path | None = None) -> dict:
