@@ -28,7 +28,7 @@ class PartnersTrain:
 
     env: tyro.conf.Positional[EnvName]
     heldout: bool = False  # train the held-out population instead of the default one
-    steps: int | None = None  # override every family's training budget (smoke runs)
+    steps: int | None = None  # smoke runs: every family gets this budget, 4 envs, 8-step rollouts
     out: Path | None = None  # write here instead of the package data (use with --steps)
 
     def run(self) -> None:
