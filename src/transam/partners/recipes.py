@@ -151,7 +151,11 @@ OVERCOOKED_PPO = PPOConfig(total_steps=160_000, num_envs=16, rollout_len=100, en
 def _overcooked(split: str) -> Recipe:
     """8 PPO partners (agent_1; agent_0 is the self-play stand-in): onion specialists (shaped
     only for onions, their training partner only for plates and soups), dish specialists (the
-    reverse) and generalists (both cooks fully shaped), over seeds."""
+    reverse) and generalists (both cooks fully shaped), over seeds.
+
+    The paper's draft also names "unshaped agents": unshaped PPO (sparse soup reward only)
+    delivered no soup at 160k or 320k steps (2 seeds), so the non-specialists keep every
+    shaping term."""
     base = 0 if split == "default" else 100
     kinds = (
         ("onion", (DISH_ONLY, ONION_ONLY)),
