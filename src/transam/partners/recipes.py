@@ -8,7 +8,7 @@ way from other seeds (and, where the spec allows, other variants), never used in
 Budgets are kept small (2 shared CPU cores). Overcooked and LBF: the shortest that gave
 partners clearly better than random on their own objective. Tag and Spread: about where the
 learners' returns level off (Spread's self-play returns gain under 2 points from 1.2M to 2M
-steps; Tag's predators reach the random prey 3.5x as often at 750k steps as at 150k).
+steps; Tag's MAPPO predators reach the random prey 3.5x as often at 750k steps as at 150k).
 Numbers in each manifest.
 """
 
