@@ -284,9 +284,9 @@ def evaluate_run(
     from transam.partners.learned import population_digest
     from transam.train.a2c import steps_per_update
     from transam.train.loop import (
-        POPULATION_FILE,
         _program_key,
         env_and_model,
+        recorded_population,
         write_atomic,
         write_json,
     )
@@ -324,11 +324,9 @@ def evaluate_run(
             f"{population!r} population here"
         )
     digest = population_digest(config.env, population)
-    trained_with = top / POPULATION_FILE
-    trained_digest = (
-        json.loads(trained_with.read_text())["digest"] if trained_with.exists() else None
-    )
-    if partners == "train" and trained_with.exists() and trained_digest != digest:
+    recorded = recorded_population(top)
+    trained_digest = recorded["digest"] if recorded else None
+    if partners == "train" and recorded and trained_digest != digest:
         notes.append(
             f"the run trained against population {trained_digest}; the shipped "
             f"{population!r} population is now {digest}: returns are not comparable with "

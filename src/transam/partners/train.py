@@ -52,8 +52,6 @@ class PPOConfig:
     minibatches: int = 4
     hidden: int = 64
     checkpoints: int = 1  # actor snapshots at evenly spaced points (the last = final policy)
-    reward_scale: float = 1.0  # training rewards times this (the returns reported are unscaled)
-    clip_each_net: bool = False  # clip actor and critic gradients to max_grad_norm separately
 
     @property
     def num_updates(self) -> int:
@@ -143,11 +141,6 @@ def make_train(
     fdim = int(feat(jnp.zeros(view.obs_dim)).shape[0])
     cdim = fdim * A if cfg.algorithm == "mappo" else fdim
     tx = optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm), optax.adam(cfg.lr, eps=1e-5))
-    if cfg.clip_each_net:
-        tx = optax.multi_transform(
-            {"actor": tx, "critic": tx},
-            lambda p: {k: jax.tree.map(lambda _, k=k: k, v) for k, v in p.items()},
-        )
 
     def critic_in(f: jax.Array) -> jax.Array:
         """[..., A, F] -> [..., A, C] critic inputs (own or all features)."""
@@ -222,10 +215,7 @@ def make_train(
                 return (adv, v), adv
 
             _, adv = jax.lax.scan(
-                gae,
-                (jnp.zeros_like(last_v), last_v),
-                (reward * cfg.reward_scale, value, done),
-                reverse=True,
+                gae, (jnp.zeros_like(last_v), last_v), (reward, value, done), reverse=True
             )
             ret = adv + value
             batch = jax.tree.map(

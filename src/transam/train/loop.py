@@ -261,13 +261,19 @@ def population_record(config: TrainConfig) -> dict[str, Any]:
     return {"env": config.env, "partners": config.partners, "digest": digest}
 
 
-def _check_population(out: Path, config: TrainConfig) -> None:
-    """Refuse to resume against a different shipped population than the run started with
-    (runs written before partners.json existed are not checked: nothing says what they used)."""
+def recorded_population(out: Path) -> dict[str, Any] | None:
+    """The run's partners.json, or None for a run written before that file existed (nothing
+    says which population it used)."""
     path = out / POPULATION_FILE
-    if not path.exists():
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def _check_population(out: Path, config: TrainConfig) -> None:
+    """Refuse to resume against a different shipped population than the run started with."""
+    recorded = recorded_population(out)
+    if recorded is None:
         return
-    was, now = json.loads(path.read_text())["digest"], population_record(config)["digest"]
+    was, now = recorded["digest"], population_record(config)["digest"]
     if was != now:
         raise RunDirError(
             f"--resume: the shipped {config.env} partner population {config.partners!r} "
