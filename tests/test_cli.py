@@ -42,6 +42,10 @@ def test_bad_values_are_rejected_with_the_valid_choices(
     assert "pong" in err.out + err.err and "spread" in err.out + err.err
     with pytest.raises(SystemExit, match="--num-envs must be >= 1, got 0"):
         main(["envs", "bench", "--num-envs", "0"])
+    with pytest.raises(SystemExit, match=r"--window must be between 1 and .* 25 .*got 26"):
+        main(["partners", "diversity", "spread", "--window", "26"])
+    with pytest.raises(SystemExit, match="--episodes must be at least 1, got 0"):
+        main(["partners", "show", "tag", "--episodes", "0"])
 
 
 def test_demo_trains_and_compares_with_a_random_agent(

@@ -128,6 +128,12 @@ class PartnersDiversity:
         from transam.partners.diversity import ClassifierConfig, cross_play, partner_id_accuracy
 
         split = _split(self.heldout)
+        env = envs.make(self.env, population=learned.population(self.env, split))
+        if not 1 <= self.window <= env.spec.episode_len:
+            raise SystemExit(
+                f"error: --window must be between 1 and {self.env}'s episode length "
+                f"{env.spec.episode_len} (a window stays inside one episode), got {self.window}"
+            )
         if self.env in ("lbf", "overcooked"):
             members = learned.learned_members(self.env, split)
             names = list(members)
@@ -139,10 +145,7 @@ class PartnersDiversity:
             for i, (n, row) in enumerate(zip(names, mat, strict=True)):
                 table.add_row(f"{i} {n}", *(f"{x:.2f}" for x in row))
             console.print(table)
-        pop = learned.population(self.env, split)
-        acc = partner_id_accuracy(
-            envs.make(self.env, population=pop), ClassifierConfig(window=self.window)
-        )
+        acc = partner_id_accuracy(env, ClassifierConfig(window=self.window))
         console.print(
             f"{self.env} {split}: partner-index top-1 accuracy from the others' obs+actions "
             f"{acc['others']:.3f}, from the controlled agent's local trajectory "
