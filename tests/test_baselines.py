@@ -15,7 +15,7 @@ import optax
 import pytest
 from local_data import random_rollout
 
-from transam import envs
+from transam.compose import make_env
 from transam.envs.core import ControlledEnv, PartnerRecord
 from transam.models import BaselineConfig, make_model
 from transam.models.base import LocalStep
@@ -31,7 +31,7 @@ TRAIN, HELD = slice(0, 16), slice(16, 24)
 
 @pytest.fixture(scope="module")
 def env() -> ControlledEnv:
-    return envs.make("spread", partners="heuristic")  # the data the thresholds were set on
+    return make_env("spread", partners="heuristic")  # the data the thresholds were set on
 
 
 @pytest.fixture(scope="module")

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from transam.envs.core import ControlledEnv, EnvError, GameSpec
+from transam.envs.population import Member, Population, Team
 from transam.envs.rollout import episode_stats
-from transam.partners.population import Member, Population, Team
 
 LEN = 4
 

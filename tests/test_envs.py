@@ -8,18 +8,19 @@ import numpy as np
 import pytest
 
 from transam import envs
+from transam.compose import make_env
 from transam.envs.core import ControlledEnv, EnvError
 from transam.envs.rollout import make_random_rollout
 
 
 @pytest.fixture(scope="module", params=envs.ENV_NAMES)
 def env(request: pytest.FixtureRequest) -> ControlledEnv:
-    return envs.make(request.param)
+    return make_env(request.param)
 
 
 def test_unknown_env_names_the_choices() -> None:
     with pytest.raises(EnvError, match=r"unknown environment 'pong'.*tag, spread, overcooked, lbf"):
-        envs.make("pong")
+        make_env("pong")
 
 
 def test_spec_matches_arrays(env: ControlledEnv) -> None:
@@ -104,7 +105,7 @@ def test_bad_inputs_raise_clear_errors(env: ControlledEnv) -> None:
 def test_default_population_is_the_shipped_one(name: str) -> None:
     from transam.partners.learned import load_manifest
 
-    pop = envs.make(name).population
+    pop = make_env(name).population
     entry = load_manifest(name)["default"]
     assert pop.name == f"{name}-default"
     learned = {m["name"] for m in entry["members"]}
@@ -120,7 +121,7 @@ def test_default_population_is_the_shipped_one(name: str) -> None:
 
 @pytest.mark.parametrize("name", envs.ENV_NAMES)
 def test_heldout_population_differs_from_default(name: str) -> None:
-    default, heldout = (envs.make(name, partners=p).population for p in ("default", "heldout"))
+    default, heldout = (make_env(name, partners=p).population for p in ("default", "heldout"))
     assert heldout.name == f"{name}-heldout"
     # Same member name, other weights (other seeds): actions differ on the same inputs.
     shared = sorted(
@@ -130,7 +131,7 @@ def test_heldout_population_differs_from_default(name: str) -> None:
     if not shared:
         assert set(default.team_names) != set(heldout.team_names)
         return
-    spec = envs.make(name, partners="heuristic").spec
+    spec = make_env(name, partners="heuristic").spec
     obs = jax.random.uniform(jax.random.key(0), (256, spec.other_obs_dim))
     keys = jax.random.split(jax.random.key(1), 256)
 
@@ -144,24 +145,47 @@ def test_heldout_population_differs_from_default(name: str) -> None:
 def test_learned_partners_refuse_a_config_they_were_not_trained_for() -> None:
     lbf, overcooked = envs.config_class("lbf"), envs.config_class("overcooked")
     with pytest.raises(EnvError, match=r"grid_size=8 \(default 20\).*partners='heuristic'"):
-        envs.make("lbf", lbf(grid_size=8))
+        make_env("lbf", lbf(grid_size=8))
     with pytest.raises(EnvError, match=r"'heldout'.*controlled_slot=1 \(default 0\)"):
-        envs.make("overcooked", overcooked(controlled_slot=1), partners="heldout")
+        make_env("overcooked", overcooked(controlled_slot=1), partners="heldout")
     with pytest.raises(EnvError, match=r"unknown partners 'best'; valid choices: default, held"):
-        envs.make("spread", partners="best")
+        make_env("spread", partners="best")
     with pytest.raises(EnvError, match="either population or partners"):
-        envs.make("spread", population=envs.make("spread").population, partners="heuristic")
+        make_env("spread", population=make_env("spread").population, partners="heuristic")
     # Reward and episode-length fields never reach the partners: the learned ones still fit.
-    short = envs.make("spread", envs.config_class("spread")(reward="pettingzoo", episode_len=5))
+    short = make_env("spread", envs.config_class("spread")(reward="pettingzoo", episode_len=5))
     assert short.population.name == "spread-default" and short.spec.episode_len == 5
 
 
 def test_heuristic_partners_fit_any_config() -> None:
     cfg = envs.config_class("lbf")(grid_size=7, num_foods=3, sight=2, penalty=0.25)
-    env = envs.make("lbf", cfg, partners="heuristic")
+    env = make_env("lbf", cfg, partners="heuristic")
     assert env.population.name == "lbf-heuristic"
     state, obs = env.reset(jax.random.key(0))
     _, ts = env.step(jax.random.key(1), state, jnp.int32(0))
     assert obs.shape == (cfg.obs_dim,) and ts.record.other_obs.shape == (1, cfg.obs_dim)
     cfg = envs.config_class("overcooked")(controlled_slot=1, random_reset=True)
-    assert envs.make("overcooked", cfg, partners="heuristic").num_partners == 5
+    assert make_env("overcooked", cfg, partners="heuristic").num_partners == 5
+
+
+def test_envs_never_import_partners() -> None:
+    """One-way layers: partners/ may import envs/, never the reverse (checked on the source,
+    so a lazy import inside a function counts too)."""
+    import ast
+    from pathlib import Path
+
+    import transam.envs
+
+    offenders = []
+    for path in Path(transam.envs.__file__).parent.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            if node.__class__ is ast.ImportFrom and node.module == "transam":
+                names += [f"transam.{a.name}" for a in node.names]
+            if any(n.startswith(("transam.partners", "transam.compose")) for n in names):
+                offenders.append(f"{path.name}:{node.lineno}")
+    assert offenders == []

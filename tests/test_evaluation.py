@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from transam import envs, grid
+from transam import grid
+from transam.compose import make_env
 from transam.evaluation import (
     Evaluate,
     balanced_partners,
@@ -150,7 +151,7 @@ def test_result_schema_and_files(run_dir: Path, result: dict[str, Any]) -> None:
     assert per["cum_return"][-1] == pytest.approx(result["return"]["mean"], rel=1e-9)
     # Spread's rewards are negative every step: the cumulative reward falls.
     assert all(b < a for a, b in zip(per["cum_return"], per["cum_return"][1:], strict=False))
-    teams = envs.make("spread").population.team_names
+    teams = make_env("spread").population.team_names
     assert list(result["per_partner_return"]) == list(teams)  # balanced: every partner plays
     probe = result["probe"]
     assert 0.0 <= probe["accuracy"] <= 1.0 and len(probe["per_step"]) == T
@@ -190,7 +191,7 @@ def test_heldout_partners(run_dir: Path, result: dict[str, Any]) -> None:
     assert held["population_name"] == "spread-heldout"
     assert held["population_digest"] == learned.digest("spread", "heldout")
     assert held["trained_population_digest"] == learned.digest("spread")
-    teams = envs.make("spread", partners="heldout").population.team_names
+    teams = make_env("spread", partners="heldout").population.team_names
     assert list(held["per_partner_return"]) == list(teams)
     assert evaluation_path(run_dir, "heldout").exists()
     assert json.loads(evaluation_path(run_dir, "train").read_text()) == result  # untouched

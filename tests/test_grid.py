@@ -7,13 +7,14 @@ import json
 import pytest
 
 from transam import envs, grid
+from transam.compose import make_env
 from transam.train.config import ConfigError
 from transam.train.loop import make_plan
 
 
 @pytest.mark.parametrize("name", envs.ENV_NAMES)
 def test_episode_lengths_match_the_environments(name: str) -> None:
-    assert grid.EPISODE_LEN[name] == envs.make(name, partners="heuristic").spec.episode_len
+    assert grid.EPISODE_LEN[name] == make_env(name, partners="heuristic").spec.episode_len
 
 
 @pytest.mark.parametrize("budget", list(grid.BUDGETS))

@@ -24,7 +24,7 @@ import pytest
 from flax import serialization
 from local_data import random_rollout
 
-from transam import envs
+from transam.compose import make_env
 from transam.envs.core import ControlledEnv
 from transam.models import METHOD_NAMES, AgentModel, BaselineConfig, TransAMConfig, make_model
 from transam.models.base import LocalStep, PartnerView
@@ -40,7 +40,7 @@ ENVS = 8
 
 @pytest.fixture(scope="module")
 def env() -> ControlledEnv:
-    return envs.make("spread", partners="heuristic")  # the data the thresholds were set on
+    return make_env("spread", partners="heuristic")  # the data the thresholds were set on
 
 
 def tiny(env: ControlledEnv, method: str) -> AgentModel:

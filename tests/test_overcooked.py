@@ -9,8 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from transam import make_env as make
 from transam._quiet import quiet
-from transam.envs import make
 from transam.envs.overcooked import (
     DISH,
     EMPTY,

@@ -14,7 +14,7 @@ import optax
 import pytest
 from local_data import random_rollout
 
-from transam import envs
+from transam.compose import make_env
 from transam.envs.core import ControlledEnv, PartnerRecord
 from transam.models import BaselineConfig, TransAMConfig, make_model
 from transam.models.base import LocalStep
@@ -28,7 +28,7 @@ ENVS, STEPS, START = 12, 40, 10  # losses over steps START.. (crossing the bound
 
 @pytest.fixture(scope="module")
 def env() -> ControlledEnv:
-    return envs.make("spread", partners="heuristic")  # the data the thresholds were set on
+    return make_env("spread", partners="heuristic")  # the data the thresholds were set on
 
 
 @pytest.fixture(scope="module")

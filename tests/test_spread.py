@@ -7,7 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from transam.envs import EnvError, make
+from transam import make_env as make
+from transam.envs import EnvError
 from transam.envs.spread import CONTROLLED, Config, SpreadGame
 from transam.partners.moves import DOWN, LEFT, RIGHT, UP
 from transam.partners.spread import HEURISTICS, heuristic_population

@@ -10,7 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from transam.envs import make
+from transam import make_env as make
+from transam.envs.population import Member
 from transam.envs.tag import (
     AGENT_SIZE,
     LANDMARK_SIZE,
@@ -21,7 +22,6 @@ from transam.envs.tag import (
     strip_boundary_penalty,
 )
 from transam.partners.moves import DOWN, LEFT, NOOP, RIGHT, UP
-from transam.partners.population import Member
 from transam.partners.tag import (
     LEARNED_SLOTS,
     after_agent_close,

@@ -15,6 +15,7 @@ import pytest
 from flax import struct
 
 from transam import envs
+from transam.compose import make_env
 from transam.envs.core import ControlledEnv, PartnerRecord
 from transam.models import BaselineConfig, make_model
 from transam.models.base import LocalStep
@@ -36,7 +37,7 @@ EPISODE = 25  # Spread's episode length: boundaries at steps 25, 50, ...
 
 @pytest.fixture(scope="module")
 def env() -> ControlledEnv:
-    return envs.make("spread", partners="heuristic")  # the data the thresholds were set on
+    return make_env("spread", partners="heuristic")  # the data the thresholds were set on
 
 
 NUM_ENVS, NUM_STEPS = 49, 100  # env 0: path tests; 1..32: training; 33..48: held out

@@ -13,7 +13,7 @@ import tyro
 from rich.console import Console
 from rich.table import Table
 
-from transam.envs import PartnerChoice
+from transam.compose import PartnerChoice
 from transam.evaluation import Evaluate
 from transam.models import METHOD_NAMES
 from transam.partners.cli import Partners
@@ -43,14 +43,14 @@ class EnvsList:
     """partner population: the shipped learned one, its held-out split, or the scripted one"""
 
     def run(self) -> None:
-        from transam import envs
+        from transam.compose import make_env
 
         table = Table(title="transam environments (controlled agent's view)")
         for col in ("env", "obs", "acts", "others", "other obs", "other acts", "steps", "teams"):
             table.add_column(col, no_wrap=True, justify="left" if col == "env" else "right")
         notes = []
         for name in ALL_ENVS:
-            env = envs.make(name, partners=self.partners)
+            env = make_env(name, partners=self.partners)
             s = env.spec
             table.add_row(
                 name,
@@ -92,7 +92,7 @@ class EnvsBench:
     """partner population: the shipped learned one, its held-out split, or the scripted one"""
 
     def run(self) -> None:
-        from transam import envs
+        from transam.compose import make_env
         from transam.envs.rollout import steps_per_second
 
         _check_positive(num_envs=self.num_envs, steps=self.steps, repeats=self.repeats)
@@ -103,7 +103,7 @@ class EnvsBench:
         for col in ("env", "median steps/s", "min", "max"):
             table.add_column(col, justify="right")
         for name in self.envs:
-            env = envs.make(name, partners=self.partners)
+            env = make_env(name, partners=self.partners)
             rates = steps_per_second(env, self.num_envs, self.steps, self.repeats)
             table.add_row(
                 name, f"{statistics.median(rates):,.0f}", f"{min(rates):,.0f}", f"{max(rates):,.0f}"
@@ -131,7 +131,7 @@ class EnvsRollout:
         import jax
         import numpy as np
 
-        from transam import envs
+        from transam.compose import make_env
         from transam.envs.rollout import episode_stats, make_random_rollout
 
         _check_positive(episodes=self.episodes, num_envs=self.num_envs)
@@ -140,7 +140,7 @@ class EnvsRollout:
             summary.add_column(col, justify="right", no_wrap=True)
         for name in self.envs:
             start = time.perf_counter()
-            env = envs.make(name, partners=self.partners)
+            env = make_env(name, partners=self.partners)
             steps = self.episodes * env.spec.episode_len
             _, ts = make_random_rollout(env, self.num_envs, steps)(jax.random.key(self.seed))
             stats = episode_stats(ts)

@@ -147,7 +147,7 @@ def find_checkpoint(run_dir: str | Path, checkpoint: str | int | None = None) ->
 
 
 def population_for(trained: str, partners: str) -> str:
-    """The partner choice (envs.make's ``partners``) that ``partners`` means for a run trained
+    """The partner choice (make_env's ``partners``) that ``partners`` means for a run trained
     with ``trained``: "train" is the run's own population; "heldout" one it never met (the
     held-out split; for a run trained on the held-out split, the default population)."""
     if partners not in EVAL_PARTNERS:

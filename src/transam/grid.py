@@ -34,7 +34,7 @@ from transam.train.config import ConfigError, EvalConfig, TrainConfig
 BudgetName = Literal["smoke", "small", "paper"]
 EVAL_PARTNERS: tuple[Literal["train", "heldout"], ...] = ("train", "heldout")
 
-# Controlled-agent steps per episode (envs.make(...).spec.episode_len), so a grid can be planned
+# Controlled-agent steps per episode (make_env(...).spec.episode_len), so a grid can be planned
 # without building environments; checked against the environments in the tests.
 EPISODE_LEN = {"tag": 50, "spread": 25, "overcooked": 400, "lbf": 50}
 

@@ -1,32 +1,15 @@
-"""The paper's four environments as controlled-agent JAX games.
+"""The paper's four environments as controlled-agent JAX games (dynamics only).
 
-``make(name)`` builds one with its default configuration and partner population. Modules are
-imported lazily so that using one environment does not pay for the others' imports.
-
-Partner populations (``make(..., partners=...)``):
-
-* ``"default"``: the shipped learned population (``transam/partners/data/<env>``, loaded by
-  :func:`transam.partners.learned.population`): learned members, mixed with heuristics where
-  the manifest's teams name them (Tag: LIAM's 10-team table).
-* ``"heldout"``: the shipped held-out population, built the same way from other seeds (and
-  other variants), never used for training: for evaluating generalisation to new partners.
-* ``"heuristic"``: the scripted population of :mod:`transam.partners.<env>`.
-
-The learned partners were trained in the default game, so they are offered only for a config
-that equals the default in every field except those in :data:`PARTNER_BLIND_FIELDS` (fields
-that change only rewards or the episode length, which the partners' policies never see: they
-act on their own observation alone). Any other change (e.g. LBF's grid size, which changes
-the observation size; Overcooked's ``controlled_slot``, which puts the partner in the seat it
-was not trained for; Tag's ``hard_walls``, which changes the dynamics) raises
-:class:`EnvError` rather than silently switching to other partners: pass
-``partners="heuristic"`` or a population of your own.
+Each module defines a ``Config``, a :class:`Game` and ``make_env(config, population)``. Partner
+populations live in :mod:`transam.partners` (which may import this package, never the
+reverse); :func:`transam.make_env` composes a game with its population. Modules are imported
+lazily so that using one environment does not pay for the others' imports.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import importlib
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any
 
 from transam.envs.core import (
     ControlledEnv,
@@ -38,45 +21,24 @@ from transam.envs.core import (
     Timestep,
 )
 
-if TYPE_CHECKING:
-    from transam.partners.population import Population
-
 ENV_NAMES: tuple[str, ...] = ("tag", "spread", "overcooked", "lbf")
-
-PartnerChoice = Literal["default", "heldout", "heuristic"]
-PARTNER_CHOICES: tuple[str, ...] = ("default", "heldout", "heuristic")
-
-PARTNER_BLIND_FIELDS: dict[str, frozenset[str]] = {
-    "tag": frozenset({"episode_len", "boundary_penalty"}),
-    "spread": frozenset({"reward", "self_collision", "local_ratio", "episode_len"}),
-    "overcooked": frozenset(
-        {"episode_len", "onion_in_pot_reward", "plate_pickup_reward", "soup_pickup_reward"}
-    ),
-    "lbf": frozenset({"penalty", "episode_len"}),
-}
-"""Config fields the shipped learned partners may run with at any value: they change only
-rewards or the episode length (Overcooked's urgency channel means "under 40 steps left" at any
-length). A field not listed here must keep its default for ``partners="default"/"heldout"``."""
 
 __all__ = [
     "ENV_NAMES",
-    "PARTNER_BLIND_FIELDS",
-    "PARTNER_CHOICES",
     "ControlledEnv",
     "EnvError",
     "EnvState",
     "Game",
     "GameSpec",
-    "PartnerChoice",
     "PartnerRecord",
     "Timestep",
+    "check_config",
     "config_class",
-    "make",
-    "partner_population",
+    "env_module",
 ]
 
 
-def _module(name: str) -> Any:
+def env_module(name: str) -> Any:
     if name not in ENV_NAMES:
         raise EnvError(f"unknown environment {name!r}; valid choices: {', '.join(ENV_NAMES)}")
     return importlib.import_module(f"transam.envs.{name}")
@@ -84,10 +46,10 @@ def _module(name: str) -> Any:
 
 def config_class(name: str) -> type:
     """The typed configuration dataclass of environment ``name``."""
-    return _module(name).Config
+    return env_module(name).Config
 
 
-def _check_config(name: str, config: Any) -> Any:
+def check_config(name: str, config: Any) -> Any:
     """``config`` (the defaults when None), checked to be ``name``'s Config."""
     cls = config_class(name)
     if config is None:
@@ -97,56 +59,3 @@ def _check_config(name: str, config: Any) -> Any:
             f"config for env {name!r} must be a {cls.__name__}; got {type(config).__name__}"
         )
     return config
-
-
-def partner_population(name: str, config: Any = None, partners: str = "default") -> Population:
-    """The ``partners`` population of env ``name`` for ``config`` (see the module docstring).
-
-    Raises :class:`EnvError` for an unknown choice, or for a learned choice with a config the
-    learned partners were not trained for (naming the fields and the way out).
-    """
-    config = _check_config(name, config)
-    if partners not in PARTNER_CHOICES:
-        raise EnvError(
-            f"unknown partners {partners!r}; valid choices: {', '.join(PARTNER_CHOICES)}"
-        )
-    if partners == "heuristic":
-        heuristics = importlib.import_module(f"transam.partners.{name}")
-        pop: Population = heuristics.heuristic_population(config)
-        return pop
-    default = type(config)()
-    changed = [
-        f"{f.name}={getattr(config, f.name)!r} (default {getattr(default, f.name)!r})"
-        for f in dataclasses.fields(config)
-        if f.name not in PARTNER_BLIND_FIELDS[name]
-        and getattr(config, f.name) != getattr(default, f.name)
-    ]
-    if changed:
-        raise EnvError(
-            f"partners {partners!r} of env {name!r} are learned in the default game and do not "
-            f"fit this config ({', '.join(changed)}); pass partners='heuristic' (valid choices: "
-            f"{', '.join(PARTNER_CHOICES)}) or a population of your own"
-        )
-    from transam.partners.learned import population
-
-    return population(name, partners)
-
-
-def make(
-    name: str,
-    config: Any = None,
-    population: Population | None = None,
-    partners: str = "default",
-) -> ControlledEnv:
-    """Environment ``name`` with ``config`` (defaults when None) and a partner population.
-
-    ``population`` is used as given; otherwise ``partners`` picks one (``"default"``: the
-    shipped learned population; ``"heldout"``; ``"heuristic"``), see the module docstring.
-    """
-    module = _module(name)
-    config = _check_config(name, config)
-    if population is None:
-        population = partner_population(name, config, partners)
-    elif partners != "default":
-        raise EnvError(f"pass either population or partners={partners!r}, not both")
-    return module.make_env(config, population)

@@ -1,7 +1,7 @@
 """Controlled-agent games: one learning agent among partners drawn from a fixed population.
 
 Every paper environment is a :class:`Game` (the multi-agent dynamics) plus a
-:class:`~transam.partners.population.Population` (the M fixed joint policies of the other
+:class:`~transam.envs.population.Population` (the M fixed joint policies of the other
 agents). :class:`ControlledEnv` turns the pair into a single-agent, pure-JAX environment:
 
 * ``reset(key, partner_id=None)`` draws a partner index uniformly (or takes the given one);
@@ -26,9 +26,13 @@ import numpy as np
 from flax import struct
 
 if TYPE_CHECKING:
-    from transam.partners.population import Population
+    from transam.envs.population import Population
 
 S = TypeVar("S")
+
+MPE_ACTION_NAMES = ("noop", "-x", "+x", "-y", "+y")
+"""MPE discrete actions as in PettingZoo/mpe2 and JaxMARL (0 no-op, 1 -x, 2 +x, 3 -y, 4 +y);
+the particle-environment fork numbers them 0, +x, -x, +y, -y (converted at its boundary)."""
 
 
 class EnvError(ValueError):

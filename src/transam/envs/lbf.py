@@ -45,7 +45,7 @@ lbforaging rule set is about as much code as those adapters.
   grid_size - 1) these are absolute grid coordinates. With a smaller sight a food is visible
   inside the (2*sight+1)^2 window and the other agent when its window coordinates lie in
   [0, 2*sight] (lbforaging's quirk, kept).
-* Partners: the shipped learned population by default (:func:`transam.envs.make`); the
+* Partners: the shipped learned population by default (:func:`transam.make_env`); the
   heuristic one of :mod:`transam.partners.lbf` with ``partners="heuristic"``.
 """
 
@@ -58,8 +58,8 @@ import jax.numpy as jnp
 from flax import struct
 
 from transam.envs.core import ControlledEnv, EnvError, GameSpec
-from transam.partners.joint import JointView
-from transam.partners.population import Population
+from transam.envs.joint import JointView
+from transam.envs.population import Population
 
 NUM_AGENTS = 2
 CONTROLLED = 0  # the controlled agent's index; the partner is agent 1
@@ -340,6 +340,6 @@ def joint_view(config: Config) -> JointView:
 
 
 def make_env(config: Config, population: Population) -> ControlledEnv:
-    """LBF with ``config`` and ``population``; :func:`transam.envs.make` builds the
+    """LBF with ``config`` and ``population``; :func:`transam.make_env` builds the
     population from a ``partners`` choice (default: the shipped learned one)."""
     return ControlledEnv(LBFGame(config), population)

@@ -56,10 +56,10 @@ with quiet():
     from jaxmarl.environments.overcooked.common import OBJECT_TO_INDEX
     from jaxmarl.environments.overcooked.overcooked import State
 
-from transam.partners.joint import JointView
+from transam.envs.joint import JointView
 
 if TYPE_CHECKING:
-    from transam.partners.population import Population
+    from transam.envs.population import Population
 
 LAYOUT = "cramped_room"
 HEIGHT, WIDTH, CHANNELS = 4, 5, 26
@@ -287,6 +287,6 @@ def _face_north(state: State) -> State:
 
 
 def make_env(config: Config, population: Population) -> ControlledEnv:
-    """Overcooked with ``config`` and ``population``; :func:`transam.envs.make` builds the
+    """Overcooked with ``config`` and ``population``; :func:`transam.make_env` builds the
     population from a ``partners`` choice (default: the shipped learned one)."""
     return ControlledEnv(OvercookedGame(config), population)

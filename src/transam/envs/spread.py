@@ -29,7 +29,7 @@ A test checks every observation and reward against mpe2 on random episodes.
     agents) + (1 - local_ratio) * (-sum of closest distances)`` with local_ratio 0.5 (JaxMARL's
     ``rewards``). With 0.5 it is exactly ``0.5 * (mpe + 1)`` per step.
 * Precision: float32 here, float64 in mpe2; observations agree to about 3e-6 over 25 steps.
-* Partners: the shipped learned population by default (:func:`transam.envs.make`); the
+* Partners: the shipped learned population by default (:func:`transam.make_env`); the
   heuristic one of :mod:`transam.partners.spread` with ``partners="heuristic"``.
 """
 
@@ -42,10 +42,9 @@ import jax
 import jax.numpy as jnp
 
 from transam._quiet import quiet
-from transam.envs.core import ControlledEnv, EnvError, GameSpec
-from transam.partners.joint import JointView
-from transam.partners.moves import MPE_ACTION_NAMES
-from transam.partners.population import Population
+from transam.envs.core import MPE_ACTION_NAMES, ControlledEnv, EnvError, GameSpec
+from transam.envs.joint import JointView
+from transam.envs.population import Population
 
 with quiet():
     from jaxmarl.environments.mpe.simple import State
@@ -182,6 +181,6 @@ class SpreadGame:
 
 
 def make_env(config: Config, population: Population) -> ControlledEnv:
-    """Spread with ``config`` and ``population``; :func:`transam.envs.make` builds the
+    """Spread with ``config`` and ``population``; :func:`transam.make_env` builds the
     population from a ``partners`` choice (default: the shipped learned one)."""
     return ControlledEnv(SpreadGame(config), population)

@@ -56,10 +56,9 @@ import jax
 import jax.numpy as jnp
 
 from transam._quiet import quiet
-from transam.envs.core import ControlledEnv, EnvError, GameSpec
-from transam.partners.joint import JointView
-from transam.partners.moves import MPE_ACTION_NAMES
-from transam.partners.population import PolicyFn, Population
+from transam.envs.core import MPE_ACTION_NAMES, ControlledEnv, EnvError, GameSpec
+from transam.envs.joint import JointView
+from transam.envs.population import PolicyFn, Population
 
 with quiet():
     from jaxmarl.environments.mpe.simple import State
@@ -325,6 +324,6 @@ def joint_view(config: Config, prey: PolicyFn, score: str = "shaped") -> JointVi
 
 
 def make_env(config: Config, population: Population) -> ControlledEnv:
-    """Tag with ``config`` and ``population``; :func:`transam.envs.make` builds the
+    """Tag with ``config`` and ``population``; :func:`transam.make_env` builds the
     population from a ``partners`` choice (default: the shipped learned one)."""
     return ControlledEnv(TagGame(config), population)

@@ -1,5 +1,5 @@
 """Partner policies (heuristic and learned) and the populations built from them."""
 
-from transam.partners.population import Member, PolicyFn, Population, Team
+from transam.envs.population import Member, PolicyFn, Population, Team
 
 __all__ = ["Member", "PolicyFn", "Population", "Team"]

@@ -123,12 +123,12 @@ class PartnersDiversity:
     record: bool = False  # store the accuracies in the shipped manifest (the README quotes it)
 
     def run(self) -> None:
-        from transam import envs
+        from transam.compose import make_env
         from transam.partners import learned
         from transam.partners.diversity import ClassifierConfig, cross_play, partner_id_accuracy
 
         split = _split(self.heldout)
-        env = envs.make(self.env, population=learned.population(self.env, split))
+        env = make_env(self.env, population=learned.population(self.env, split))
         if not 1 <= self.window <= env.spec.episode_len:
             raise SystemExit(
                 f"error: --window must be between 1 and {self.env}'s episode length "

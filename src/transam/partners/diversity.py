@@ -21,7 +21,7 @@ import numpy as np
 import optax
 
 from transam.envs.core import ControlledEnv
-from transam.partners.population import Member
+from transam.envs.population import Member
 from transam.partners.train import apply
 
 
@@ -126,7 +126,7 @@ def cross_play(env: str, members: list[Member], episodes: int = 16) -> np.ndarra
     Team score: the partner's sparse score in Overcooked (the soup reward is shared), the
     summed shares (fraction of food collected) in LBF. One compiled program for all pairs.
     """
-    from transam.partners.joint import play
+    from transam.envs.joint import play
     from transam.partners.learned import joint_view
 
     view = joint_view(env)

@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 
 from transam.envs.lbf import EAST, LOAD, NONE, NORTH, SOUTH, WEST, Config, split_obs
-from transam.partners.population import Member, PolicyFn, Population, Team
+from transam.envs.population import Member, PolicyFn, Population, Team
 
 
 def valid_from_obs(obs: jax.Array, config: Config) -> jax.Array:

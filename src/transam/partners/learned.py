@@ -21,8 +21,8 @@ import numpy as np
 from flax.traverse_util import flatten_dict, unflatten_dict
 from safetensors.numpy import load_file, save_file
 
-from transam.partners.joint import JointView, play
-from transam.partners.population import Member, PolicyFn, Population, Team
+from transam.envs.joint import JointView, play
+from transam.envs.population import Member, PolicyFn, Population, Team
 from transam.partners.recipes import Recipe
 from transam.partners.train import make_policy, train_many
 
@@ -271,7 +271,7 @@ def digest(env: str, split: str = "default", root: Path | None = None) -> str:
 
 
 def population_digest(env: str, partners: str) -> str | None:
-    """:func:`digest` of the population ``envs.make(env, partners=partners)`` plays; None for
+    """:func:`digest` of the population ``make_env(env, partners=partners)`` plays; None for
     the scripted ``"heuristic"`` one (code, not data)."""
     return None if partners == "heuristic" else digest(env, partners)
 

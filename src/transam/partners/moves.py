@@ -10,7 +10,6 @@ import jax
 import jax.numpy as jnp
 
 NOOP, LEFT, RIGHT, DOWN, UP = 0, 1, 2, 3, 4
-MPE_ACTION_NAMES = ("noop", "-x", "+x", "-y", "+y")
 
 
 def move_toward(delta: jax.Array, strict: bool = False) -> jax.Array:

@@ -63,7 +63,7 @@ from transam.envs.overcooked import (
     WALL_CELLS,
     WIDTH,
 )
-from transam.partners.population import Member, PolicyFn, Population, Team
+from transam.envs.population import Member, PolicyFn, Population, Team
 
 if TYPE_CHECKING:
     from transam.envs.overcooked import Config

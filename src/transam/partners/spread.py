@@ -33,9 +33,9 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from transam.envs.population import Member, PolicyFn, Population, Team
 from transam.envs.spread import LANDMARKS, NUM_LANDMARKS, VEL, Config
 from transam.partners.moves import move_toward
-from transam.partners.population import Member, PolicyFn, Population, Team
 
 LEAD = 0.2  # seconds of own velocity subtracted from the target offset (damps overshoot)
 

@@ -33,8 +33,8 @@ from typing import TYPE_CHECKING
 import jax
 import jax.numpy as jnp
 
+from transam.envs.population import Member, PolicyFn, Population, Team
 from transam.partners.moves import DOWN, LEFT, RIGHT, UP, move_toward
-from transam.partners.population import Member, PolicyFn, Population, Team
 
 if TYPE_CHECKING:
     from transam.envs.tag import Config

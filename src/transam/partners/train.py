@@ -1,7 +1,7 @@
 """A compact IPPO / MAPPO trainer for partner policies (pure JAX, one jitted program).
 
 Why its own trainer: partners are small feed-forward actor-critics trained once, offline, on a
-:class:`~transam.partners.joint.JointView`; the agent-modeling A2C in ``transam.train`` solves a
+:class:`~transam.envs.joint.JointView`; the agent-modeling A2C in ``transam.train`` solves a
 different problem (one recurrent agent among fixed partners).
 
 * Every learner has its own actor and critic (parameters stacked on a leading agent axis and
@@ -26,8 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from transam.partners.joint import JointView
-from transam.partners.population import PolicyFn
+from transam.envs.joint import JointView
+from transam.envs.population import PolicyFn
 
 Algorithm = Literal["ippo", "mappo"]
 Params = Any

@@ -12,7 +12,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from transam.envs import ENV_NAMES, PARTNER_CHOICES, EnvError, PartnerChoice
+from transam.compose import PARTNER_CHOICES, PartnerChoice
+from transam.envs import ENV_NAMES, EnvError
 from transam.models import METHOD_NAMES, BaselineConfig, TransAMConfig
 
 EnvName = Literal["tag", "spread", "overcooked", "lbf"]

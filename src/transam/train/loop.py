@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import serialization
 
-from transam import envs
+from transam.compose import make_env
 from transam.envs.core import ControlledEnv
 from transam.models import make_model
 from transam.models.base import AgentModel
@@ -100,7 +100,7 @@ class RunResult:
 
 @functools.lru_cache(maxsize=8)
 def env_and_model(config: TrainConfig) -> tuple[ControlledEnv, AgentModel]:
-    e = envs.make(config.env, partners=config.partners)
+    e = make_env(config.env, partners=config.partners)
     return e, make_model(config.method, e.spec, config.model, config.baseline)
 
 

@@ -16,7 +16,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from transam.partners.population import PolicyFn
+from transam.envs.population import PolicyFn
 
 StepFn = Callable[
     [jax.Array, Any, jax.Array, jax.Array], tuple[Any, jax.Array, jax.Array, jax.Array]
