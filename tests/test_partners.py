@@ -152,3 +152,29 @@ def test_recipe_training_is_deterministic_and_the_digest_tracks_the_weights(
     learned.save("lbf", "default", {k: v + 1e-3 for k, v in t1.items()}, e1, root=tmp_path)
     assert learned.digest("lbf", root=tmp_path) != before
     assert "diversity" not in learned.load_manifest("lbf", tmp_path)["default"]  # stale: dropped
+
+
+def test_member_action_selection_is_a_property_of_the_member() -> None:
+    """``act: argmax`` plays the most likely action whatever the key; ``sample`` draws from the
+    softmax (so it varies with the key); an unknown arch or act is named in the error."""
+    import jax
+    import jax.numpy as jnp
+
+    params = learned.load_params("spread")
+    entry = next(m for m in learned.load_manifest("spread")["default"]["members"])
+    obs = jnp.linspace(-1.0, 1.0, 18)
+    logits = learned.ARCHITECTURES["mlp"](params[entry["name"]], entry, "spread")(obs)
+    greedy = learned.member_policy(params[entry["name"]], {**entry, "act": "argmax"}, "spread")
+    keys = jax.random.split(jax.random.key(0), 64)
+    assert {int(greedy(k, obs)) for k in keys} == {int(jnp.argmax(logits))}
+    sampler = learned.member_policy(params[entry["name"]], {**entry, "act": "sample"}, "spread")
+    # Tempered so that sampling surely shows more than one action in 64 draws.
+    flat = learned.member_policy(
+        jax.tree.map(lambda x: x * 0.0, params[entry["name"]]), entry, "spread"
+    )
+    assert len({int(flat(k, obs)) for k in keys}) > 1
+    assert 0 <= int(sampler(keys[0], obs)) < 5
+    with pytest.raises(ValueError, match="unknown act 'greedy'; valid choices: sample, argmax"):
+        learned.member_policy(params[entry["name"]], {**entry, "act": "greedy"}, "spread")
+    with pytest.raises(ValueError, match="unknown arch 'cnn'; valid choices: mlp"):
+        learned.member_policy(params[entry["name"]], {**entry, "arch": "cnn"}, "spread")

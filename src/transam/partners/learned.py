@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -24,7 +25,7 @@ from safetensors.numpy import load_file, save_file
 from transam.envs.joint import JointView, play
 from transam.envs.population import Member, PolicyFn, Population, Team
 from transam.partners.recipes import Recipe
-from transam.partners.train import make_policy, train_many
+from transam.partners.train import ACT_MODES, LogitsFn, make_logits, make_policy, select, train_many
 
 SPLITS = ("default", "heldout")
 EVAL_EPISODES = 32
@@ -276,17 +277,46 @@ def population_digest(env: str, partners: str) -> str | None:
     return None if partners == "heuristic" else digest(env, partners)
 
 
+MemberBuilder = Callable[[dict[str, Any], dict[str, Any], str], LogitsFn]
+"""(member params, manifest member entry, env) -> the member's logits function."""
+
+
+def _mlp_logits(params: dict[str, Any], entry: dict[str, Any], env: str) -> LogitsFn:
+    view_actions = {"tag": 5, "spread": 5, "overcooked": 6, "lbf": 6}[env]
+    return make_logits(params, env, view_actions, entry["hidden"])
+
+
+ARCHITECTURES: dict[str, MemberBuilder] = {
+    "mlp": _mlp_logits,  # our IPPO/MAPPO actor (transam.partners.train.MLP)
+}
+"""Network architectures a manifest member may name (``"arch"``, default ``"mlp"``)."""
+
+
+def member_policy(params: dict[str, Any], entry: dict[str, Any], env: str) -> PolicyFn:
+    """The act function of one manifest member: its architecture's logits, then its action
+    selection (``"act"``: ``"sample"`` (default) or ``"argmax"``)."""
+    arch = entry.get("arch", "mlp")
+    if arch not in ARCHITECTURES:
+        valid = ", ".join(ARCHITECTURES)
+        raise ValueError(f"member {entry['name']!r}: unknown arch {arch!r}; valid choices: {valid}")
+    act = entry.get("act", "sample")
+    if act not in ACT_MODES:
+        valid = ", ".join(ACT_MODES)
+        raise ValueError(f"member {entry['name']!r}: unknown act {act!r}; valid choices: {valid}")
+    return select(ARCHITECTURES[arch](params, entry, env), act)
+
+
 def learned_members(
     env: str, split: str = "default", root: Path | None = None
 ) -> dict[str, Member]:
-    """The shipped learned members of ``env`` as population members (sampling actors)."""
-    view_actions = {"tag": 5, "spread": 5, "overcooked": 6, "lbf": 6}[env]
+    """The shipped learned members of ``env`` as population members, each acting as its
+    manifest entry says (architecture and action selection)."""
     entry = load_manifest(env, root)[split]
     params = load_params(env, split, root)
     return {
         m["name"]: Member(
             m["name"],
-            make_policy(params[m["name"]], env, view_actions, m["hidden"]),
+            member_policy(params[m["name"]], m, env),
             kind=f"{m['kind']}:{m['recipe']}",
         )
         for m in entry["members"]

@@ -31,6 +31,12 @@ from transam.envs.population import PolicyFn
 
 Algorithm = Literal["ippo", "mappo"]
 Params = Any
+LogitsFn = Callable[[jax.Array], jax.Array]
+"""One member's logits over its actions from its own observation."""
+
+ACT_MODES = ("sample", "argmax")
+"""How a learned member picks its action from its logits (a property of each member)."""
+
 FeatureFn = Callable[[jax.Array], jax.Array]
 
 
@@ -111,17 +117,30 @@ FEATURES: dict[str, FeatureFn] = {
 }
 
 
-def make_policy(params: Params, view_name: str, num_actions: int, hidden: int) -> PolicyFn:
-    """A population member's act function: samples from the actor closing over ``params``."""
+def make_logits(params: Params, view_name: str, num_actions: int, hidden: int) -> LogitsFn:
+    """The actor's logits as a function of one observation, closing over ``params``."""
     net = MLP(hidden, num_actions)
     feat = FEATURES[view_name]
     params = jax.tree.map(jnp.asarray, params)
+    return lambda obs: apply(net, params, feat(obs))
 
-    def act(key: jax.Array, obs: jax.Array) -> jax.Array:
-        logits = apply(net, params, feat(obs))
-        return jax.random.categorical(key, logits).astype(jnp.int32)
 
-    return act
+def select(logits_fn: LogitsFn, act: str = "sample") -> PolicyFn:
+    """A member's act function from its logits: ``"sample"`` draws from the softmax,
+    ``"argmax"`` plays the most likely action (greedy, deterministic; the key is unused)."""
+    if act not in ACT_MODES:
+        raise ValueError(f"unknown action selection {act!r}; valid choices: {', '.join(ACT_MODES)}")
+    if act == "argmax":
+        return lambda key, obs: jnp.argmax(logits_fn(obs)).astype(jnp.int32)
+    return lambda key, obs: jax.random.categorical(key, logits_fn(obs)).astype(jnp.int32)
+
+
+def make_policy(
+    params: Params, view_name: str, num_actions: int, hidden: int, act: str = "sample"
+) -> PolicyFn:
+    """A population member's act function: the actor closing over ``params``, sampling or
+    greedy (:func:`select`)."""
+    return select(make_logits(params, view_name, num_actions, hidden), act)
 
 
 def make_train(
