@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -11,9 +13,15 @@ from transam import make_env as make
 from transam.envs import EnvError
 from transam.envs.spread import CONTROLLED, Config, SpreadGame
 from transam.partners.moves import DOWN, LEFT, RIGHT, UP
-from transam.partners.spread import HEURISTICS, heuristic_population
+from transam.partners.spread import (
+    AUTHORS_HEURISTICS,
+    HEURISTICS,
+    heuristic_population,
+    landmark_agent,
+)
 
 EPISODES = 20
+REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "authors-spread"
 T = 25
 
 
@@ -61,11 +69,12 @@ def _mpe_formula(pos: np.ndarray, self_collision: bool) -> np.ndarray:
 
 def test_parity_with_mpe2() -> None:
     ref = _mpe2_episodes()
-    game = SpreadGame(Config())
+    mpe2 = Config(dynamics="mpe2")
+    game = SpreadGame(mpe2)
     rewarders = {
-        "mpe": SpreadGame(Config()),
-        "noself": SpreadGame(Config(self_collision=False)),
-        "pettingzoo": SpreadGame(Config(reward="pettingzoo")),
+        "mpe": SpreadGame(mpe2),
+        "noself": SpreadGame(Config(dynamics="mpe2", self_collision=False)),
+        "pettingzoo": SpreadGame(Config(dynamics="mpe2", reward="pettingzoo")),
     }
 
     def episode(pos0: jax.Array, vel0: jax.Array, acts: jax.Array):
@@ -232,3 +241,76 @@ def test_config_and_population() -> None:
     assert len(set(pop.team_names)) == pop.size == 13
     assert {s for t in pop.teams for s in t.slots} == set(HEURISTICS)
     assert CONTROLLED == 2
+
+
+def test_authors_dynamics_move_with_the_new_velocity() -> None:
+    """Constructed state: one agent at rest pushed +x for one step. The fork (authors) moves it
+    by dt * v_new = 0.1 * (0.1 * 5) = 0.05 at once; mpe2 moves with the old velocity (0) first,
+    so it has not moved after one step and moves 0.05 * 0.75 + 0.05 after two."""
+    pos = jnp.asarray([[-0.9, -0.9], [0.9, 0.9], [0.0, 0.0], [0.5, 0.5], [-0.5, 0.5], [0.5, -0.5]])
+    push = jnp.asarray(RIGHT, jnp.int32)
+    still = jnp.zeros(2, jnp.int32)
+    moved = {}
+    for dynamics in ("authors", "mpe2"):
+        game = SpreadGame(Config(dynamics=dynamics))
+        state = game.reset(jax.random.key(0)).replace(p_pos=pos, p_vel=jnp.zeros_like(pos))
+        xs = []
+        for _ in range(2):
+            state, _, _ = game.transition(jax.random.key(1), state, push, still)
+            xs.append(float(state.p_pos[CONTROLLED, 0]))
+        moved[dynamics] = xs
+    np.testing.assert_allclose(moved["authors"], [0.05, 0.05 + 0.1 * (0.75 * 0.5 + 0.5)], atol=1e-6)
+    np.testing.assert_allclose(moved["mpe2"], [0.0, 0.05], atol=1e-6)
+
+
+def test_authors_landmarks_spawn_in_the_smaller_square() -> None:
+    """Landmarks in 0.8 * U(-1, 1)^2 (authors) vs U(-1, 1)^2 (mpe2); agents in U(-1, 1)^2 both."""
+    keys = jax.random.split(jax.random.key(0), 4096)
+    for dynamics, bound in (("authors", 0.8), ("mpe2", 1.0)):
+        game = SpreadGame(Config(dynamics=dynamics))
+        pos = np.asarray(jax.vmap(game.reset)(keys).p_pos)
+        landmarks, agents = np.abs(pos[:, 3:]), np.abs(pos[:, :3])
+        assert landmarks.max() <= bound and landmarks.max() > bound - 0.01
+        assert agents.max() <= 1.0 and agents.max() > 0.99
+    with pytest.raises(EnvError, match="dynamics must be one of authors, mpe2; got 'fork'"):
+        Config(dynamics="fork")  # type: ignore[arg-type]
+
+
+def test_authors_heuristics_on_constructed_observations() -> None:
+    """One-axis steering without lead: ties go to x, a zero component moves +, never no-op;
+    farthest/closest by squared distance with the lowest index on ties."""
+    key = jax.random.key(0)
+    obs = _obs_with_landmarks([(0.3, 0.3), (0.0, -0.5), (-0.1, 0.0)])
+    obs = obs.at[0:2].set(jnp.asarray([5.0, -5.0]))  # velocity: the authors' rules ignore it
+    acts = {n: int(f(key, obs)) for n, f in AUTHORS_HEURISTICS.items()}
+    assert acts == {
+        "after_first_landmark": RIGHT,  # |dx| == |dy|: x
+        "after_second_landmark": DOWN,
+        "after_third_landmark": LEFT,
+        "after_farthest_landmark": DOWN,  # 0.25 > 0.18 > 0.01
+        "after_closest_landmark": LEFT,
+    }
+    zero = _obs_with_landmarks([(0.0, 0.0), (0.2, 0.0), (0.0, 0.2)])
+    assert int(AUTHORS_HEURISTICS["after_first_landmark"](key, zero)) == RIGHT  # 0: + along x
+    tie = _obs_with_landmarks([(0.0, -0.4), (0.4, 0.0), (0.1, 0.1)])
+    assert int(AUTHORS_HEURISTICS["after_farthest_landmark"](key, tie)) == DOWN  # first of ties
+
+
+def test_authors_heuristics_match_their_code() -> None:
+    """Every row of the authors' reference observations, against their loader's heuristics
+    (fork numbering 1 +x, 2 -x, 3 +y, 4 -y mapped to ours)."""
+    path = REFERENCE / "reference_io.npz"
+    if not path.exists():
+        pytest.skip(f"reference folder {REFERENCE} absent (the authors' Spread fixtures)")
+    ref = np.load(path)
+    fork_to_ours = np.asarray([0, RIGHT, LEFT, UP, DOWN])
+    obs = jnp.asarray(ref["obs"], jnp.float32)
+    for name, fn in AUTHORS_HEURISTICS.items():
+        ours = np.asarray(jax.vmap(fn, in_axes=(None, 0))(jax.random.key(0), obs))
+        np.testing.assert_array_equal(ours, fork_to_ours[ref[f"heur_{name}_action"]], name)
+
+
+def test_landmark_agent_heads_for_the_uncovered_landmark() -> None:
+    obs = _obs_with_landmarks([(0.5, 0.0), (-0.5, 0.1), (0.0, 0.6)])
+    obs = obs.at[10:14].set(jnp.asarray([0.5, 0.05, 0.0, 0.55]))  # partners on landmarks 0, 2
+    assert int(landmark_agent(jax.random.key(0), obs)) == LEFT  # landmark 1 is uncovered

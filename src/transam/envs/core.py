@@ -121,6 +121,26 @@ class Timestep:
     record: PartnerRecord
 
 
+def fork_integrate(
+    damping: float,
+    dt: float,
+    p_force: jax.Array,
+    p_pos: jax.Array,
+    p_vel: jax.Array,
+    mass: jax.Array,
+    moveable: jax.Array,
+    max_speed: jax.Array,
+) -> tuple[jax.Array, jax.Array]:
+    """One entity's step in the particle-environment fork's order: damp the velocity, add the
+    force, clip the speed (``max_speed`` < 0: no cap), then move with the NEW velocity (JaxMARL
+    and mpe2 move with the old one first). The TransAM authors' Spread and LIAM's Tag use it."""
+    p_vel = p_vel * (1 - damping) + (p_force / mass) * dt * moveable
+    speed = jnp.sqrt(jnp.sum(jnp.square(p_vel)))
+    clipped = p_vel / jnp.maximum(speed, 1e-12) * max_speed
+    p_vel = jnp.where((speed > max_speed) & (max_speed >= 0), clipped, p_vel)
+    return p_pos + p_vel * dt, p_vel
+
+
 def is_concrete(x: Any) -> bool:
     """True when ``x`` holds a value now (not a tracer), so it can be checked eagerly."""
     return not isinstance(x, jax.core.Tracer)

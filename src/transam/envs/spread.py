@@ -1,14 +1,23 @@
 """Spread: MPE cooperative navigation (3 agents, 3 landmarks) with one controlled agent.
 
-Source: the dynamics and observations of PettingZoo/mpe2 ``simple_spread_v3`` (N=3), through
-JaxMARL 0.2.0's :class:`~jaxmarl.environments.mpe.simple_spread.SimpleSpreadMPE`, which this
-module wraps (its reset, physics step, observations and local-ratio reward are used as they are).
-A test checks every observation and reward against mpe2 on random episodes.
+Two variants of the dynamics (``Config.dynamics``), both on JaxMARL 0.2.0's
+:class:`~jaxmarl.environments.mpe.simple_spread.SimpleSpreadMPE` (its physics step, contact
+forces and observations are used as they are):
+
+* ``"authors"`` (default): the experiment that produced the paper's numbers. The TransAM
+  authors ran the "on-policy" ``simple_spread.py`` on the particle-environment fork: landmarks
+  spawn in **0.8**·U(-1, 1)^2 (agents in U(-1, 1)^2) and the integrator updates **velocity
+  before position** (v <- 0.75 v + 0.1 F; p <- p + 0.1 v_new). Random play scores about -59
+  per episode against the authors' population in their loop; the paper's TransAM -48.76.
+* ``"mpe2"``: PettingZoo/mpe2 ``simple_spread_v3`` (landmarks in U(-1, 1)^2, position updated
+  before velocity, as JaxMARL); a test checks every observation and reward against mpe2.
+
+Common to both:
 
 * Agents: radius 0.15, colliding (soft contact force 100, margin 1e-3), accel 5, no speed cap;
-  landmarks: radius 0.05, not colliding. dt 0.1, damping 0.25, position updated before velocity.
-  Positions of agents and landmarks start U(-1, 1)^2, velocities 0. No walls.
-* Actions (all agents): Discrete(5) = 0 no-op, 1 -x, 2 +x, 3 -y, 4 +y.
+  landmarks: radius 0.05, not colliding. dt 0.1, damping 0.25. Velocities start at 0. No walls.
+* Actions (all agents): Discrete(5) = 0 no-op, 1 -x, 2 +x, 3 -y, 4 +y (mpe2's numbering; the
+  fork's 1 +x, 2 -x, 3 +y, 4 -y is converted where fork-trained policies are imported).
 * Observation (18, every agent): [own vel (2), own pos (2), the 3 landmarks relative to self (6),
   the 2 other agents relative to self in index order (4), their communication (4, always 0)].
 * Controlled agent: index 2 (as the TransAM authors' code); the partners are agents 0 and 1, and
@@ -17,32 +26,31 @@ A test checks every observation and reward against mpe2 on random episodes.
   own ``done`` would come one step late and is ignored); there is no early termination.
 * Reward (``Config.reward``):
   - ``"mpe"`` (default): the original MPE cooperative-navigation reward of the controlled agent
-    (openai multiagent-particle-envs ``simple_spread.Scenario.reward``): minus the sum over
-    landmarks of the distance to the closest agent, minus 1 for every agent within 0.3 (sum of
-    radii) of the controlled agent, the controlled agent itself included as the openai code does
-    (a constant -1 per step; ``self_collision=False`` drops it). It is the controlled agent's own
-    reward, not openai's ``collaborative`` sum over the three agents. Returns are on the paper's
-    scale (TransAM -48.8): random play scores about -68 per episode (-80 to -55 by team)
-    against the shipped default population, -62 (-71 to -56) against the heuristic one, and
-    the best landmark heuristic about -46 to -58 by team.
+    (openai multiagent-particle-envs ``simple_spread.Scenario.reward``, as the authors ran it):
+    minus the sum over landmarks of the distance to the closest agent, minus 1 for every agent
+    within 0.3 (sum of radii) of the controlled agent, the controlled agent itself included as
+    the openai code does (a constant -1 per step; ``self_collision=False`` drops it). It is the
+    controlled agent's own reward, not openai's ``collaborative`` sum over the three agents.
   - ``"pettingzoo"``: mpe2 simple_spread_v3's reward, ``local_ratio * (-collisions with the other
     agents) + (1 - local_ratio) * (-sum of closest distances)`` with local_ratio 0.5 (JaxMARL's
     ``rewards``). With 0.5 it is exactly ``0.5 * (mpe + 1)`` per step.
 * Precision: float32 here, float64 in mpe2; observations agree to about 3e-6 over 25 steps.
-* Partners: the shipped learned population by default (:func:`transam.make_env`); the
-  heuristic one of :mod:`transam.partners.spread` with ``partners="heuristic"``.
+* Partners: :func:`transam.make_env` joins the game with a population (default: the shipped
+  learned one); the heuristic one of :mod:`transam.partners.spread` with
+  ``partners="heuristic"``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Literal
 
 import jax
 import jax.numpy as jnp
 
 from transam._quiet import quiet
-from transam.envs.core import MPE_ACTION_NAMES, ControlledEnv, EnvError, GameSpec
+from transam.envs.core import MPE_ACTION_NAMES, ControlledEnv, EnvError, GameSpec, fork_integrate
 from transam.envs.joint import JointView
 from transam.envs.population import Population
 
@@ -65,16 +73,25 @@ VEL, POS, LANDMARKS, OTHERS, COMM = (
 )
 
 
+DYNAMICS = ("authors", "mpe2")
+AUTHORS_LANDMARK_RANGE = 0.8  # landmarks spawn in 0.8 * U(-1, 1)^2 in the authors' scenario
+
+
 @dataclass(frozen=True)
 class Config:
     """Spread options."""
 
+    dynamics: Literal["authors", "mpe2"] = "authors"  # the authors' fork variant, or mpe2 v3's
     reward: Literal["mpe", "pettingzoo"] = "mpe"  # original MPE per-agent reward, or mpe2 v3's
     self_collision: bool = True  # "mpe" reward: the agent counts as colliding with itself (-1/step)
     local_ratio: float = 0.5  # "pettingzoo" reward: weight of the local collision term
     episode_len: int = 25  # transitions per episode (no early termination)
 
     def __post_init__(self) -> None:
+        if self.dynamics not in DYNAMICS:
+            raise EnvError(
+                f"spread dynamics must be one of {', '.join(DYNAMICS)}; got {self.dynamics!r}"
+            )
         if self.reward not in ("mpe", "pettingzoo"):
             raise EnvError(f"spread reward must be 'mpe' or 'pettingzoo'; got {self.reward!r}")
         if not 0.0 <= self.local_ratio <= 1.0:
@@ -83,12 +100,50 @@ class Config:
             raise EnvError(f"spread episode_len must be >= 1; got {self.episode_len!r}")
 
 
+class AuthorsSpreadMPE(SimpleSpreadMPE):
+    """JaxMARL's simple_spread with the authors' scenario: 0.8 landmark range, fork integrator."""
+
+    @partial(jax.jit, static_argnums=[0])
+    def reset(self, key: jax.Array) -> tuple[dict, State]:
+        key_a, key_l = jax.random.split(key)
+        p_pos = jnp.concatenate(
+            [
+                jax.random.uniform(key_a, (self.num_agents, 2), minval=-1.0, maxval=1.0),
+                AUTHORS_LANDMARK_RANGE
+                * jax.random.uniform(key_l, (self.num_landmarks, 2), minval=-1.0, maxval=1.0),
+            ]
+        )
+        state = State(
+            p_pos=p_pos,
+            p_vel=jnp.zeros((self.num_entities, self.dim_p)),
+            c=jnp.zeros((self.num_agents, self.dim_c)),
+            done=jnp.array(False),
+            step=jnp.array(0),
+        )
+        return self.get_obs(state), state
+
+    @partial(jax.vmap, in_axes=[None, 0, 0, 0, 0, 0, 0])
+    def _integrate_state(
+        self,
+        p_force: jax.Array,
+        p_pos: jax.Array,
+        p_vel: jax.Array,
+        mass: jax.Array,
+        moveable: jax.Array,
+        max_speed: jax.Array,
+    ) -> tuple[jax.Array, jax.Array]:
+        return fork_integrate(
+            self.damping, self.dt, p_force, p_pos, p_vel, mass, moveable, max_speed
+        )
+
+
 class SpreadGame:
-    """simple_spread_v3 seen from agent 2; the state is JaxMARL's MPE ``State``."""
+    """Spread seen from agent 2; the state is JaxMARL's MPE ``State``."""
 
     def __init__(self, config: Config) -> None:
         self.config = config
-        self.mpe = SimpleSpreadMPE(
+        mpe_class = AuthorsSpreadMPE if config.dynamics == "authors" else SimpleSpreadMPE
+        self.mpe = mpe_class(
             num_agents=NUM_AGENTS, num_landmarks=NUM_LANDMARKS, local_ratio=config.local_ratio
         )
         self.spec = GameSpec(
@@ -100,7 +155,15 @@ class SpreadGame:
             other_num_actions=5,
             episode_len=config.episode_len,
             action_names=MPE_ACTION_NAMES,
-            description="MPE cooperative navigation (mpe2 simple_spread_v3), controlled agent 2",
+            description=(
+                "MPE cooperative navigation ("
+                + (
+                    "the authors' variant: landmarks 0.8·U(-1,1)², velocity-first integration"
+                    if config.dynamics == "authors"
+                    else "mpe2 simple_spread_v3"
+                )
+                + "), controlled agent 2"
+            ),
         )
 
     def reset(self, key: jax.Array) -> State:

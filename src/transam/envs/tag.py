@@ -56,7 +56,7 @@ import jax
 import jax.numpy as jnp
 
 from transam._quiet import quiet
-from transam.envs.core import MPE_ACTION_NAMES, ControlledEnv, EnvError, GameSpec
+from transam.envs.core import MPE_ACTION_NAMES, ControlledEnv, EnvError, GameSpec, fork_integrate
 from transam.envs.joint import JointView
 from transam.envs.population import PolicyFn, Population
 
@@ -118,12 +118,10 @@ class LiamTagMPE(SimpleTagMPE):
         moveable: jax.Array,
         max_speed: jax.Array,
     ) -> tuple[jax.Array, jax.Array]:
-        """The fork's order: damp, add force, clip speed, then move with the NEW velocity."""
-        p_vel = p_vel * (1 - self.damping) + (p_force / mass) * self.dt * moveable
-        speed = jnp.sqrt(jnp.sum(jnp.square(p_vel)))
-        clipped = p_vel / jnp.maximum(speed, 1e-12) * max_speed
-        p_vel = jnp.where((speed > max_speed) & (max_speed >= 0), clipped, p_vel)
-        return p_pos + p_vel * self.dt, p_vel
+        """The fork's order (:func:`~transam.envs.core.fork_integrate`)."""
+        return fork_integrate(
+            self.damping, self.dt, p_force, p_pos, p_vel, mass, moveable, max_speed
+        )
 
     def _apply_environment_force(self, p_force_all: jax.Array, state: State) -> jax.Array:
         """Entity contacts (JaxMARL) plus the fork's soft wall force on movable entities."""

@@ -25,7 +25,15 @@ response of the controlled agent differs across teams:
 * mixed teams ``first+closest``, ``closest+second``, ``third+farthest``, ``farthest+first``: one
   fixed and one adaptive partner, in both slot orders.
 
-RL partners (IPPO/MAPPO at several skill levels) join in a later issue.
+The TransAM authors' five heuristics (their ``pretrained_spread_opponents.py``, used by the
+default learned population and the imported authors' one): ``after_first_landmark``,
+``after_second_landmark``, ``after_third_landmark``, ``after_farthest_landmark``,
+``after_closest_landmark``. Plain one-axis bang-bang steering toward the landmark offset (no
+lead): x if ``|dx| >= |dy|``, a zero component moves +, never the no-op; farthest/closest by
+squared distance, the lowest index on ties. They overshoot and circle their landmark, as theirs.
+
+:func:`landmark_agent` is a controlled-agent rule for scale, not a partner: head for the
+landmark whose nearest partner is farthest away, steering as the authors' heuristics do.
 """
 
 from __future__ import annotations
@@ -34,7 +42,7 @@ import jax
 import jax.numpy as jnp
 
 from transam.envs.population import Member, PolicyFn, Population, Team
-from transam.envs.spread import LANDMARKS, NUM_LANDMARKS, VEL, Config
+from transam.envs.spread import LANDMARKS, NUM_LANDMARKS, OTHERS, VEL, Config
 from transam.partners.moves import move_toward
 
 LEAD = 0.2  # seconds of own velocity subtracted from the target offset (damps overshoot)
@@ -80,6 +88,27 @@ HEURISTICS: dict[str, PolicyFn] = {
     "closest": go_to_ranked(farthest=False),
     "farthest": go_to_ranked(farthest=True),
 }
+"""Our led landmark seekers (the ``partners="heuristic"`` population)."""
+
+AUTHORS_HEURISTICS: dict[str, PolicyFn] = {
+    "after_first_landmark": go_to(0, lead=0.0),
+    "after_second_landmark": go_to(1, lead=0.0),
+    "after_third_landmark": go_to(2, lead=0.0),
+    "after_farthest_landmark": go_to_ranked(farthest=True, lead=0.0),
+    "after_closest_landmark": go_to_ranked(farthest=False, lead=0.0),
+}
+"""The authors' five rules exactly (module doc), by their names."""
+
+
+def landmark_agent(key: jax.Array, obs: jax.Array) -> jax.Array:
+    """Controlled agent: head for the landmark whose nearest partner is farthest away (the
+    landmark least likely to be covered), with the authors' one-axis steering."""
+    del key
+    offsets = landmark_offsets(obs)  # [3, 2] relative to self
+    partners = obs[OTHERS].reshape(2, 2)  # [2, 2] relative to self
+    gap = jnp.linalg.norm(offsets[:, None, :] - partners[None, :, :], axis=-1)  # [L, P]
+    return move_toward(offsets[jnp.argmax(jnp.min(gap, axis=1))])
+
 
 DEFAULT_TEAMS: tuple[tuple[str, str], ...] = (
     ("first", "second"),
@@ -99,12 +128,14 @@ DEFAULT_TEAMS: tuple[tuple[str, str], ...] = (
 
 
 def heuristic_members() -> list[Member]:
-    """The five landmark seekers as population members."""
-    return [Member(name, fn) for name, fn in HEURISTICS.items()]
+    """Every Spread heuristic as a population member: our five led landmark seekers and the
+    authors' five rules (a population's teams pick among them by name)."""
+    return [Member(name, fn) for name, fn in {**HEURISTICS, **AUTHORS_HEURISTICS}.items()]
 
 
 def heuristic_population(config: Config | None = None) -> Population:
     """The heuristic Spread population (``partners="heuristic"``): the module doc's 13 teams."""
     del config  # the heuristics read observations only; no option changes them
     teams = [Team(f"{a}+{b}", (a, b)) for a, b in DEFAULT_TEAMS]
-    return Population("spread-heuristic", heuristic_members(), teams)
+    members = [Member(name, fn) for name, fn in HEURISTICS.items()]
+    return Population("spread-heuristic", members, teams)
