@@ -46,6 +46,17 @@ def test_bad_values_are_rejected_with_the_valid_choices(
         main(["partners", "diversity", "spread", "--window", "26"])
     with pytest.raises(SystemExit, match="--episodes must be at least 1, got 0"):
         main(["partners", "show", "tag", "--episodes", "0"])
+    # Tag's default population is LIAM's, imported: training it is refused with the way out.
+    with pytest.raises(SystemExit, match=r"imported, not trained: `transam partners import-liam"):
+        main(["partners", "train", "tag"])
+
+
+def test_partners_import_liam_names_what_is_missing(tmp_path: Path) -> None:
+    with pytest.raises(SystemExit, match=rf"missing LICENSE in {tmp_path}"):
+        main(["partners", "import-liam", "tag", str(tmp_path), "--out", str(tmp_path / "o")])
+    (tmp_path / "LICENSE").write_text("MIT License\n")
+    with pytest.raises(SystemExit, match=r"missing params_ia2c_agent_0\.npz"):
+        main(["partners", "import-liam", "tag", str(tmp_path), "--out", str(tmp_path / "o")])
 
 
 def test_demo_trains_and_compares_with_a_random_agent(

@@ -7,6 +7,8 @@ Partner populations (``make_env(..., partners=...)``):
   the manifest's teams name them.
 * ``"heldout"``: the shipped held-out population, built the same way from other seeds (and
   other variants), never used for training: for evaluating generalisation to new partners.
+  Tag differs: its default population is LIAM's pretrained predators (imported, MIT), its
+  held-out one our own learned predators in the same 10-team table.
 * ``"heuristic"``: the scripted population of :mod:`transam.partners.<env>`.
 
 The learned partners were trained in the default game, so they are offered only for a config

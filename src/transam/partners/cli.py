@@ -40,7 +40,10 @@ class PartnersTrain:
                 "error: --steps changes the recipe's budget; pass --out DIR too, so the shipped "
                 f"{self.env} population is not overwritten by a smoke run"
             )
-        r = recipe(self.env, self.heldout)
+        try:
+            r = recipe(self.env, self.heldout)
+        except ValueError as err:
+            raise SystemExit(f"error: {err}") from None
         if self.steps is not None:
             r = r.scaled(self.steps)
         t0 = time.time()
@@ -80,26 +83,40 @@ class PartnersShow:
         )
         digest = learned.digest(self.env, split)
         table = Table(title=f"{self.env} {split} learned partners (digest {digest})")
-        cols = ("member", "kind", "recipe", "seed", "shaping", "gamma", "steps", "self-play")
-        extra = ("touches",) if touches else ()
-        for c in (*cols, "measured", *extra):
-            table.add_column(c, justify="left" if c in ("member", "recipe") else "right")
-        for m in entry["members"]:
-            table.add_row(
-                m["name"],
-                m["kind"],
-                m["recipe"],
-                str(m["seed"]),
-                m["shaping"],
-                f"{m['gamma']:g}",
-                f"{m['steps']:,}",
-                f"{m['self_play_return']:.3f}",
-                f"{measured[m['name']]:.3f}",
-                *([f"{touches[m['name']]:.2f}"] if extra else []),
-            )
+        rows = [
+            {
+                "member": m["name"],
+                "kind": m["kind"],
+                "recipe": m["recipe"],
+                "act": m.get("act", "sample"),
+                # Imported members (LIAM's) have no training metadata: "-", column dropped.
+                "seed": str(m.get("seed", "-")),
+                "shaping": m.get("shaping", "-"),
+                "gamma": f"{m['gamma']:g}" if "gamma" in m else "-",
+                "steps": f"{m['steps']:,}" if "steps" in m else "-",
+                "self-play": f"{m['self_play_return']:.3f}" if "self_play_return" in m else "-",
+                "vs": learned.stand_in_of(m),
+                "measured": f"{measured[m['name']]:.3f}",
+                **({"touches": f"{touches[m['name']]:.2f}"} if touches else {}),
+            }
+            for m in entry["members"]
+        ]
+        cols = [c for c in rows[0] if any(r[c] != "-" for r in rows)]
+        for c in cols:
+            table.add_column(c, justify="left" if c in ("member", "recipe", "vs") else "right")
+        for r in rows:
+            table.add_row(*(r[c] for c in cols))
         console.print(table)
-        console.print(f"random play: {entry['random_return']}")
-        if extra:
+        if "source" in entry:
+            src = entry["source"]
+            licence = learned.data_dir(self.env) / src["license_file"]
+            console.print(
+                f"imported from {src['repository']}@{src['commit'][:8]} ({src['license']}, "
+                f"{src['copyright']}; licence in {licence})"
+            )
+        if "random_return" in entry:
+            console.print(f"random play: {entry['random_return']}")
+        if touches:
             rnd = {k.split("/")[1]: round(v, 2) for k, v in touches.items() if "/" in k}
             console.print(
                 f"touches: steps per episode with a predator within the capture distance of "
@@ -109,7 +126,8 @@ class PartnersShow:
             console.print("teams: " + ", ".join(t["name"] for t in entry["teams"]))
         console.print(
             "self-play: the member's training run (manifest); measured: every learner slot "
-            f"played by this member, against the run's stand-in ({self.episodes} episodes)"
+            f"played by this member, against the stand-in in column vs ({self.episodes} "
+            "episodes)"
         )
 
 
@@ -169,11 +187,33 @@ class PartnersDiversity:
 
 
 @dataclass
+class PartnersImportLiam:
+    """Convert LIAM's six pretrained Tag predators (.npz exports of its .pt files, with its
+    LICENSE) into Tag's default population in the package data."""
+
+    env: tyro.conf.Positional[Literal["tag"]]
+    src: tyro.conf.Positional[Path]  # folder of params_{ia2c,maddpg}_agent_{0,1,2}.npz + LICENSE
+    out: Path | None = None  # write here instead of the package data
+
+    def run(self) -> None:
+        from transam.partners import learned
+        from transam.partners.liam import import_liam
+
+        try:
+            path = import_liam(self.src, root=self.out)
+        except (FileNotFoundError, ValueError) as err:
+            raise SystemExit(f"error: {err}") from None
+        digest = learned.digest(self.env, "default", root=self.out)
+        console.print(f"imported LIAM's predators -> {path} (digest {digest})")
+
+
+@dataclass
 class Partners:
-    """Learned partner populations: train, show, diversity."""
+    """Learned partner populations: train, import-liam, show, diversity."""
 
     cmd: (
         Annotated[PartnersTrain, tyro.conf.subcommand("train")]
+        | Annotated[PartnersImportLiam, tyro.conf.subcommand("import-liam")]
         | Annotated[PartnersShow, tyro.conf.subcommand("show")]
         | Annotated[PartnersDiversity, tyro.conf.subcommand("diversity")]
     )

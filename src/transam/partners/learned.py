@@ -4,6 +4,10 @@ Layout: ``transam/partners/data/<env>/manifest.json`` holds, per split (``defaul
 ``heldout``), the member table (name, kind, recipe, seed, shaping, gamma, steps, agent,
 checkpoint, self-play return) and the teams; ``<split>.safetensors`` holds each member's actor
 as ``<member>/<param path>`` tensors. Loading reads these files only: no network, no training.
+
+An imported split (Tag's default: LIAM's predators, :mod:`transam.partners.liam`) has a
+``source`` entry (repository, commit, licence) instead of training metadata; its members name
+their ``arch`` and ``act``, and have no seed, stand-in or self-play return.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from safetensors.numpy import load_file, save_file
 
 from transam.envs.joint import JointView, play
 from transam.envs.population import Member, PolicyFn, Population, Team
+from transam.partners import liam
 from transam.partners.recipes import Recipe
 from transam.partners.train import ACT_MODES, LogitsFn, make_logits, make_policy, select, train_many
 
@@ -78,6 +83,16 @@ def evaluate(
     return np.asarray(fn(jax.random.PRNGKey(seed)))
 
 
+MEASURE_PREY = "random"
+"""The Tag prey that plays against a member with no training stand-in (an imported one)."""
+
+
+def stand_in_of(member: dict[str, Any]) -> str:
+    """The stand-in a manifest member is measured against: its training one, else
+    :data:`MEASURE_PREY` (LIAM's predators trained against LIAM's own prey, not shipped)."""
+    return str(member.get("stand_in", MEASURE_PREY))
+
+
 def measure_members(
     env: str,
     rows: list[dict],
@@ -89,8 +104,8 @@ def measure_members(
     """Mean score with every learner slot played by one member (one program per stand-in);
     ``with_random`` adds uniformly random players as ``random/<stand-in>``."""
     out: dict[str, float] = {}
-    for stand_in in sorted({m["stand_in"] for m in rows}):
-        names = [m["name"] for m in rows if m["stand_in"] == stand_in]
+    for stand_in in sorted({stand_in_of(m) for m in rows}):
+        names = [m["name"] for m in rows if stand_in_of(m) == stand_in]
         acts = [members[n].act for n in names]
         view = joint_view(env, stand_in, tag_score)
         if with_random:
@@ -187,6 +202,8 @@ def rescore(env: str, split: str = "default", root: Path | None = None) -> dict:
     """
     manifest = load_manifest(env, root)
     entry = manifest[split]
+    if "source" in entry:
+        raise ValueError(f"{env}/{split} is imported from {entry['source']['repository']}: no runs")
     members = learned_members(env, split, root)
     runs: dict[tuple, dict[int, str]] = {}
     for m in entry["members"]:
@@ -288,6 +305,8 @@ def _mlp_logits(params: dict[str, Any], entry: dict[str, Any], env: str) -> Logi
 
 ARCHITECTURES: dict[str, MemberBuilder] = {
     "mlp": _mlp_logits,  # our IPPO/MAPPO actor (transam.partners.train.MLP)
+    "liam-ia2c": liam.ia2c_logits,  # LIAM's IA2C Tag predators
+    "liam-maddpg": liam.maddpg_logits,  # LIAM's MADDPG Tag predators (BatchNorm in eval mode)
 }
 """Network architectures a manifest member may name (``"arch"``, default ``"mlp"``)."""
 
@@ -344,18 +363,15 @@ def heuristic_pool(env: str) -> dict[str, Member]:
 
 
 def population(env: str, split: str = "default", root: Path | None = None) -> Population:
-    """``env``'s shipped population: learned members plus the heuristics its teams name.
-
-    Tag uses LIAM's 10-team table with the six learned predators in its learned slots.
-    """
-    learned = learned_members(env, split, root)
-    name = f"{env}-{split}"
-    if env == "tag":
-        from transam.partners.tag import liam_population
-
-        return liam_population(learned, name=name)
+    """``env``'s shipped population: the teams of ``split``'s manifest, over its learned
+    members and the environment's heuristics (Tag: LIAM's 10-team table)."""
     entry = load_manifest(env, root)[split]
-    pool = {**heuristic_pool(env), **learned}
+    pool = {**heuristic_pool(env), **learned_members(env, split, root)}
     teams = [Team(t["name"], tuple(t["slots"])) for t in entry["teams"]]
+    unknown = sorted({s for t in teams for s in t.slots} - set(pool))
+    if unknown:
+        raise ValueError(
+            f"{env}/{split} teams name unknown member(s) {unknown}; valid: {', '.join(pool)}"
+        )
     used = sorted({s for t in teams for s in t.slots})
-    return Population(name, [pool[n] for n in used], teams)
+    return Population(f"{env}-{split}", [pool[n] for n in used], teams)

@@ -4,6 +4,8 @@ A *family* is one compiled training program (game view + stand-in + static PPO s
 *run* is one vmapped lane of it (seed, discount, shaping); a run yields one member per
 (checkpoint, agent) it names. The held-out population of each environment is built the same
 way from other seeds (and, where the spec allows, other variants), never used in training.
+Tag is the exception: its default population is LIAM's predators (imported, :data:`IMPORTED`)
+and its held-out one is ours.
 
 Budgets are kept small (2 shared CPU cores). Overcooked and LBF: the shortest that gave
 partners clearly better than random on their own objective. Tag and Spread: about where the
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from transam.partners.tag import LIAM_TABLE
 from transam.partners.train import PPOConfig
 
 ONION_ONLY = (3.0, 0.0, 0.0)  # (onion into pot, useful plate pickup, soup pickup)
@@ -76,14 +79,19 @@ TAG_PPO = PPOConfig(total_steps=750_000, num_envs=32, rollout_len=50)
 
 
 def _tag(split: str) -> Recipe:
-    """Six learned predators: rl_a0-2 (IPPO vs a fleeing prey, with a 5x entropy bonus: loose,
-    stochastic chasers), rl_b0-2 (MAPPO vs a random prey: tight chasers), placed in LIAM's
-    10-team table (the lookup happens in the loader).
+    """Tag's held-out population: six learned predators, rl_a0-2 (IPPO vs a fleeing prey, with a
+    5x entropy bonus: loose, stochastic chasers) and rl_b0-2 (MAPPO vs a random prey: tight
+    chasers), in LIAM's 10-team table where LIAM has its IA2C (rl_a<i>) and MADDPG (rl_b<i>)
+    agent i. The default population is LIAM's own predators, imported (:data:`IMPORTED`).
 
-    Why the entropy bonus: with the default bonus both families end up chasing like LIAM's
-    ``after_prey`` heuristic, and a classifier tells the 10 teams apart from the predators'
-    data only 21% of the time (chance 10%, LIAM's all-heuristic table 22%); with it, 35%."""
-    seed = 0 if split == "default" else 100
+    These six were Tag's default population before LIAM's replaced it (same seeds, same
+    weights). Why the entropy bonus: with the default bonus both families end up chasing like
+    LIAM's ``after_prey`` heuristic, and a classifier tells the 10 teams apart from the
+    predators' data only 21% of the time (chance 10%, LIAM's all-heuristic table 22%); with it,
+    35%."""
+    if split == "default":
+        raise ValueError(IMPORTED[("tag", "default")])
+    seed = 0
     fams = (
         Family("ippo-flee", replace(TAG_PPO, ent_coef=0.05), stand_in="flee"),
         Family("mappo-random", replace(TAG_PPO, algorithm="mappo"), stand_in="random"),
@@ -92,7 +100,8 @@ def _tag(split: str) -> Recipe:
         Run("ippo-flee", seed, 0.95, tuple((f"rl_a{i}", 0, i) for i in range(3))),
         Run("mappo-random", seed + 1, 0.95, tuple((f"rl_b{i}", 0, i) for i in range(3))),
     )
-    return Recipe("tag", split, fams, runs, teams=())
+    teams = tuple((f"liam{i}", row) for i, row in enumerate(LIAM_TABLE))
+    return Recipe("tag", split, fams, runs, teams)
 
 
 # ------------------------------------------------------------------------------- Spread
@@ -205,9 +214,19 @@ def _lbf(split: str) -> Recipe:
 
 BUILDERS = {"tag": _tag, "spread": _spread, "overcooked": _overcooked, "lbf": _lbf}
 
+IMPORTED: dict[tuple[str, str], str] = {
+    ("tag", "default"): (
+        "Tag's default population is LIAM's pretrained predators, imported, not trained: "
+        "`transam partners import-liam tag DIR` converts them; `transam partners train tag "
+        "--heldout` trains ours (the held-out population)"
+    ),
+}
+"""(env, split) populations converted from elsewhere rather than trained from a recipe."""
+
 
 def recipe(env: str, heldout: bool = False) -> Recipe:
-    """The recipe of ``env``'s default (or held-out) learned population."""
+    """The recipe of ``env``'s default (or held-out) learned population; an imported split
+    (:data:`IMPORTED`) has none and raises ValueError saying how it is made."""
     if env not in BUILDERS:
         raise ValueError(f"unknown environment {env!r}; valid: {', '.join(BUILDERS)}")
     return BUILDERS[env]("heldout" if heldout else "default")

@@ -14,15 +14,20 @@ mirrored action indices). Each reads its own 16-dim predator observation, in whi
   key it is given (stochastic).
 
 Population. LIAM draws one of 10 teams per episode from a 10 x 3 table over a pool of the four
-heuristics, three IA2C and three MADDPG predators (spec 2.7). We keep that table; its six
-learned entries are named by slot key (``rl_a0..2`` for LIAM's IA2C agents 0-2, ``rl_b0..2`` for
-its MADDPG agents 0-2; our own RL predators take these places later). Until they exist,
-:func:`liam_population` fills each learned key with a fixed heuristic stand-in
-(:data:`STAND_INS`). The stand-ins were chosen so that the 10 teams are 10 different MULTISETS
-of heuristics (predators are interchangeable, so a team is only distinguishable by what it
-contains) and each heuristic appears 7 or 8 times in the 30 slots. Pass ``learned={key:
-Member}`` to swap learned predators in; team names (``liam0``..``liam9`` = LIAM's task ids) do
-not change.
+heuristics, three IA2C and three MADDPG predators (spec 2.7). :data:`LIAM_TABLE` is that table
+with its six learned entries named by slot key (``rl_a0..2`` where LIAM has IA2C agents 0-2,
+``rl_b0..2`` for its MADDPG agents 0-2). Who fills the learned slots:
+
+* ``partners="default"``: LIAM's own predators (:mod:`transam.partners.liam`, the manifest's
+  teams);
+* ``partners="heldout"``: our RL predators ``rl_a0..2`` / ``rl_b0..2`` (recipe ``_tag``);
+* ``partners="heuristic"`` (:func:`heuristic_population`): a fixed heuristic stand-in per
+  slot (:data:`STAND_INS`), chosen so that the 10 teams are 10 different MULTISETS of
+  heuristics (predators are interchangeable, so a team is only distinguishable by what it
+  contains) and each heuristic appears 7 or 8 times in the 30 slots.
+
+:func:`liam_population` builds the table with ``learned={key: Member}`` swapped in; team names
+(``liam0``..``liam9`` = LIAM's task ids) do not change.
 """
 
 from __future__ import annotations
