@@ -29,7 +29,8 @@ JSON: ``env``, ``method``, ``seed``, ``partners`` ("train"|"heldout"), ``populat
 partner choice it mapped to), ``population_name``, ``trained_partners``, ``population_digest``
 and ``trained_population_digest`` (the shipped population's fingerprint now and the run's
 partners.json's; None for scripted partners or runs older than that file), ``checkpoint`` (path
-relative to the run directory), ``step``, ``episodes``, ``greedy``, ``return`` {mean, std},
+relative to the run directory: the named one, or the newest that verifies, any newer one that
+does not being named in ``notes``), ``step``, ``episodes``, ``greedy``, ``return`` {mean, std},
 ``action_accuracy`` and ``obs_mse`` (only where the model predicts them),
 ``per_partner_return`` {team: mean}, ``per_step`` {cum_return, action_accuracy?, obs_mse?},
 ``probe`` {accuracy, per_step, chance, train_episodes, test_episodes, features, ridge} and
