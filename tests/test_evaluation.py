@@ -223,6 +223,23 @@ def test_named_checkpoint_and_bad_names(run_dir: Path, tmp_path: Path) -> None:
         evaluate_run(copy, episodes=EPISODES)
 
 
+def test_a_corrupt_newest_checkpoint_falls_back_to_the_previous_one(
+    run_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    copy = tmp_path / "run"
+    shutil.copytree(run_dir, copy)
+    newest = copy / "checkpoints" / "chunk_000001.msgpack"
+    newest.write_bytes(newest.read_bytes()[:-100])  # truncated
+    capsys.readouterr()
+    res = evaluate_run(copy, episodes=EPISODES)
+    assert res["checkpoint"] == "checkpoints/chunk_000000.msgpack" and res["step"] == 500
+    assert "chunk_000001.msgpack failed verification" in capsys.readouterr().err
+    assert any("chunk_000001.msgpack failed verification" in n for n in res["notes"])
+    assert newest.exists()  # evaluation reports it and leaves it where it is
+    with pytest.raises(ConfigError, match=r"chunk_000001\.msgpack failed verification"):
+        evaluate_run(copy, episodes=EPISODES, checkpoint="1")  # named: no silent fallback
+
+
 def test_cli_prints_a_summary(
     run_dir: Path, result: dict[str, Any], capsys: pytest.CaptureFixture[str]
 ) -> None:

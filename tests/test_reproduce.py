@@ -5,6 +5,7 @@ checkpoint and finished runs are never redone."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -73,6 +74,27 @@ def test_rerun_redoes_nothing(smoke: Path) -> None:
     assert after == launches
     for p, data in before.items():
         assert p.read_bytes() == data, f"{p} was rewritten"
+
+
+def test_a_run_with_a_corrupt_newest_checkpoint_resumes_from_the_previous_one(
+    smoke: Path, tmp_path: Path
+) -> None:
+    """The grid's resume goes through train(): a truncated newest checkpoint is moved aside, the
+    run retrains from the one before and ends with the same metrics and evaluation."""
+    spec = grid.RunSpec("spread", "nam", 0)
+    out = tmp_path / "grid"
+    shutil.copytree(smoke, out)
+    run = out / spec.rel
+    newest = run / "checkpoints" / "chunk_000001.msgpack"
+    newest.write_bytes(newest.read_bytes()[:500])
+    for name in ("final.json", "eval_train.json", "eval_heldout.json"):
+        (run / name).unlink()
+    summary = grid.run_one(out, spec, grid.BUDGETS["smoke"])
+    assert summary["trained"] and summary["evaluated"] == ["train", "heldout"]
+    assert (run / "checkpoints" / "chunk_000001.msgpack.corrupt").exists()
+    original = smoke / spec.rel
+    for name in ("metrics.jsonl", "final.json", "eval_train.json"):
+        assert (run / name).read_text() == (original / name).read_text(), name
 
 
 def test_bad_grid_arguments_fail_before_writing(tmp_path: Path, capsys) -> None:

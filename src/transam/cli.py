@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shlex
 import statistics
 import sys
 import time
@@ -314,12 +315,19 @@ class Reproduce:
 
 def _run_train(config: TrainConfig) -> bool:
     """Train and print the final evaluation table; True when the run finished."""
-    from transam.train.loop import train
+    from transam.train.loop import NonFiniteError, train
+    from transam.train.rundir import RunInterrupted, WriteError
 
     try:
         result = train(config)
-    except ConfigError as err:
+    except (ConfigError, NonFiniteError, WriteError) as err:
         raise SystemExit(f"error: {err}") from None
+    except RunInterrupted as err:
+        again = [*_ARGV, *([] if "--resume" in _ARGV else ["--resume"])]
+        if _ARGV[:1] == ["demo"] and "--no-force" not in _ARGV:
+            again.append("--no-force")  # the demo starts over by default
+        console.print(f"{err}\nresume with: {shlex.join(['transam', *again])}")
+        raise SystemExit(128 + err.signum) from None
     if not result.finished:
         console.print(f"stopped early; resume with --resume --out {result.run_dir}")
         return False
@@ -368,11 +376,15 @@ def main(argv: list[str] | None = None) -> None:
     )
     _setup_jax()
     from transam.envs import EnvError
+    from transam.train.rundir import RunInterrupted, WriteError
 
     try:
         cmd.run()
-    except EnvError as err:
+    except (EnvError, ConfigError, WriteError) as err:
         raise SystemExit(f"error: {err}") from None
+    except RunInterrupted as err:  # a grid stopped by a signal: rerunning it resumes
+        console.print(f"{err}\nrerun the same command to continue")
+        raise SystemExit(128 + err.signum) from None
 
 
 if __name__ == "__main__":

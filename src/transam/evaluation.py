@@ -29,7 +29,8 @@ JSON: ``env``, ``method``, ``seed``, ``partners`` ("train"|"heldout"), ``populat
 partner choice it mapped to), ``population_name``, ``trained_partners``, ``population_digest``
 and ``trained_population_digest`` (the shipped population's fingerprint now and the run's
 partners.json's; None for scripted partners or runs older than that file), ``checkpoint`` (path
-relative to the run directory), ``step``, ``episodes``, ``greedy``, ``return`` {mean, std},
+relative to the run directory: the named one, or the newest that verifies, any newer one that
+does not being named in ``notes``), ``step``, ``episodes``, ``greedy``, ``return`` {mean, std},
 ``action_accuracy`` and ``obs_mse`` (only where the model predicts them),
 ``per_partner_return`` {team: mean}, ``per_step`` {cum_return, action_accuracy?, obs_mse?},
 ``probe`` {accuracy, per_step, chance, train_episodes, test_episodes, features, ridge} and
@@ -131,8 +132,9 @@ def load_run_config(run_dir: str | Path) -> TrainConfig:
 
 def find_checkpoint(run_dir: str | Path, checkpoint: str | int | None = None) -> Path:
     """The newest checkpoint of ``run_dir``, or the named one (a file name such as
-    ``chunk_000003.msgpack``, with or without the suffix, or a chunk number)."""
-    from transam.train.loop import checkpoints
+    ``chunk_000003.msgpack``, with or without the suffix, or a chunk number). Not verified:
+    :func:`evaluate_run` reads it (and falls back past a bad newest one)."""
+    from transam.train.rundir import checkpoints
 
     found = checkpoints(Path(run_dir))
     names = ", ".join(p.name for _, p in sorted(found.items()))
@@ -255,16 +257,41 @@ def _program(config: TrainConfig, n: int) -> Callable[..., Any]:
     return jax.jit(make_episodes(config, env, model, n))
 
 
-def _restore(config: TrainConfig, path: Path) -> Any:
-    """The RunnerState in checkpoint ``path`` (the template is only shapes: nothing compiled)."""
-    from flax import serialization
-
+def _restore(
+    config: TrainConfig, run_dir: Path, checkpoint: str | int | None, notes: list[str]
+) -> tuple[Path, Any]:
+    """(path, RunnerState) of the named checkpoint, or of the newest one that verifies (each
+    newer one that does not is reported and noted). The template is only shapes: nothing is
+    compiled."""
     from transam.train.a2c import init_runner
     from transam.train.loop import env_and_model
+    from transam.train.rundir import (
+        CheckpointError,
+        checkpoints,
+        newest_good_checkpoint,
+        read_checkpoint,
+        warn,
+    )
 
     env, model = env_and_model(config)
     template = jax.eval_shape(lambda k: init_runner(config, env, model, k), jax.random.key(0))
-    return serialization.from_bytes(template, path.read_bytes())
+    path = find_checkpoint(run_dir, checkpoint)
+    if checkpoint is not None:
+        try:
+            return path, read_checkpoint(path, template)
+        except CheckpointError as err:
+            raise ConfigError(f"{err}; choose another with --checkpoint") from None
+
+    def report(message: str) -> None:
+        warn(message)
+        notes.append(message)
+
+    found = newest_good_checkpoint([run_dir], template, report=report)
+    if found is None:
+        names = ", ".join(p.name for _, p in sorted(checkpoints(run_dir).items()))
+        raise ConfigError(f"no checkpoint of {str(run_dir)!r} verifies (have: {names})")
+    chunk, (state,) = found
+    return checkpoints(run_dir)[chunk], state
 
 
 def _per_step_mean(values: np.ndarray, live: np.ndarray) -> list[float | None]:
@@ -280,7 +307,32 @@ def evaluate_run(
     seed: int = 0,
 ) -> dict[str, Any]:
     """Evaluate a run's checkpoint on ``episodes`` episodes with its training partners or
-    held-out ones; write eval_{partners}.json/.png/_pca.npz and return the JSON's contents."""
+    held-out ones; write eval_{partners}.json/.png/_pca.npz and return the JSON's contents.
+    Holds the run's lock meanwhile; without ``checkpoint``, uses the newest checkpoint that
+    verifies and notes each newer one that does not."""
+    from transam.train.rundir import run_lock
+
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 2:
+        raise ConfigError(f"episodes must be an integer >= 2, got {episodes!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
+    run_dir = Path(run_dir)
+    config = load_run_config(run_dir)
+    population_for(config.partners, partners)  # checks ``partners``
+    top = run_dir if (run_dir / "config.json").exists() else run_dir.parent
+    with run_lock(top, "transam evaluate"):
+        return _evaluate_locked(run_dir, top, config, episodes, partners, checkpoint, seed)
+
+
+def _evaluate_locked(
+    run_dir: Path,
+    top: Path,
+    config: TrainConfig,
+    episodes: int,
+    partners: EvalPartners,
+    checkpoint: str | int | None,
+    seed: int,
+) -> dict[str, Any]:
     from transam.partners.learned import population_digest
     from transam.train.a2c import steps_per_update
     from transam.train.loop import (
@@ -291,15 +343,9 @@ def evaluate_run(
         write_json,
     )
 
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 2:
-        raise ConfigError(f"episodes must be an integer >= 2, got {episodes!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
-    run_dir = Path(run_dir)
-    config = load_run_config(run_dir)
-    population = population_for(config.partners, partners)  # checks ``partners``
-    ckpt = find_checkpoint(run_dir, checkpoint)
-    state = _restore(config, ckpt)
+    population = population_for(config.partners, partners)
+    notes: list[str] = []
+    ckpt, state = _restore(config, run_dir, checkpoint, notes)
 
     eval_config = dataclasses.replace(config, partners=population)  # type: ignore[arg-type]
     env, model = env_and_model(eval_config)
@@ -314,8 +360,6 @@ def evaluate_run(
     labels = np.asarray(ep.partner)
     returns = reward.sum(0)
 
-    notes = []
-    top = run_dir if (run_dir / "config.json").exists() else run_dir.parent
     if not (top / "final.json").exists():
         notes.append("the run has not finished training (no final.json)")
     if partners == "heldout" and config.partners != "default":

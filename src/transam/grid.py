@@ -133,7 +133,8 @@ def run_one(out: str | Path, spec: RunSpec, budget: Budget) -> dict[str, Any]:
     """Train (or resume, or skip) one grid run, then evaluate it on the training and held-out
     partners where not done yet. Safe to call again after any failure; returns a summary."""
     from transam.evaluation import evaluate_run, evaluation_path
-    from transam.train.loop import checkpoints, train
+    from transam.train.loop import train
+    from transam.train.rundir import checkpoints
 
     out = Path(out)
     config = run_config(spec, budget, out)

@@ -441,13 +441,52 @@ def make_chunk(
     """A jitted ``state -> (state, metrics)`` doing ``num_updates`` updates in one ``lax.scan``.
 
     Metrics are reduced over the chunk: ``episodes`` and ``return_sum`` are sums (training
-    return = return_sum / episodes), everything else is a mean over updates.
+    return = return_sum / episodes), everything else is a mean over updates, except the
+    non-finite check's ``nonfinite`` and ``nonfinite_update`` (:func:`nonfinite_check`).
     """
     update = make_update(config, env, model)
 
     def chunk(rs: RunnerState) -> tuple[RunnerState, Metrics]:
+        start = rs.update
         rs, metrics = jax.lax.scan(lambda s, _: update(s), rs, None, length=num_updates)
         summed = ("episodes", "return_sum")
-        return rs, {k: v.sum(0) if k in summed else v.mean(0) for k, v in metrics.items()}
+        out = {k: v.sum(0) if k in summed else v.mean(0) for k, v in metrics.items()}
+        out.update(nonfinite_check(metrics, rs, start))
+        return rs, out
 
     return jax.jit(chunk)
+
+
+NONFINITE_SCALARS = (
+    "policy_loss",
+    "value_loss",
+    "entropy",
+    "model_loss",
+    "grad_norm/policy",
+    "grad_norm/model",
+)
+NONFINITE_QUANTITIES = (*NONFINITE_SCALARS, "policy_params", "model_params")
+"""What :func:`nonfinite_check` watches, in the order of its ``nonfinite`` flags."""
+HEALTH_KEYS = ("nonfinite", "nonfinite_update")
+"""The chunk metrics that are the check's output (not logged as training metrics)."""
+
+
+def nonfinite_check(metrics: Metrics, rs: RunnerState, start: jax.Array) -> Metrics:
+    """Inside the chunk: ``nonfinite`` [Q] bool, which of NONFINITE_QUANTITIES went non-finite
+    (the scalars at the first update where any did; the parameters at the chunk's end), and
+    ``nonfinite_update``, the number (1-based) of that first update (0 when all are finite).
+    A few reductions per chunk over per-update scalars and one over the parameters."""
+    bad = jnp.stack([~jnp.isfinite(metrics[k]) for k in NONFINITE_SCALARS], -1)  # [U, Q]
+    any_bad = bad.any(-1)
+    first = jnp.argmax(any_bad)
+    params_bad = jnp.stack([~_all_finite(rs.policy_params), ~_all_finite(rs.model_params)])
+    flags = jnp.concatenate([bad[first] & any_bad[first], params_bad])
+    update = jnp.where(any_bad.any(), start + first + 1, jnp.where(params_bad.any(), rs.update, 0))
+    return {"nonfinite": flags, "nonfinite_update": update.astype(jnp.int32)}
+
+
+def _all_finite(tree: Any) -> jax.Array:
+    leaves = jax.tree.leaves(tree)
+    if not leaves:  # e.g. NAM has no agent-model parameters
+        return jnp.array(True)
+    return jnp.stack([jnp.isfinite(x).all() for x in leaves]).all()

@@ -7,7 +7,9 @@ Run directory (``--out``)::
     final.json             written last: the run is finished (its final evaluation per seed)
     metrics.jsonl          one JSON object per chunk (= per evaluation point)
     tb/                    TensorBoard event files (same scalars, plus steps/s)
-    checkpoints/           chunk_NNNNNN.msgpack: the whole runner state (last two kept)
+    checkpoints/           chunk_NNNNNN.msgpack: the whole runner state and its SHA-256
+                           (last two kept; one that fails verification becomes *.corrupt)
+    .lock                  held (flock) by the one process training or evaluating the run
 
 With ``--num-seeds n > 1`` the per-seed files (metrics.jsonl, tb/, checkpoints/) sit in
 ``seed_S/`` subdirectories and config.json / final.json at the top. Both seed modes write the
@@ -19,6 +21,16 @@ from the msgpack checkpoint, which includes RNG keys, optimiser states and the r
 normaliser) gives the same file as an uninterrupted one. Wall-clock numbers (steps/s) go only to
 TensorBoard and the console for that reason. On resume, metrics lines past the checkpoint are
 dropped and recomputed.
+
+Integrity (:mod:`transam.train.rundir`): a resume starts from the newest checkpoint that
+verifies (each failing one is named on stderr); a second process on the same ``--out`` is
+refused; the first SIGINT/SIGTERM checkpoints at the end of the running chunk and raises
+:class:`~transam.train.rundir.RunInterrupted`. The jitted chunk flags any non-finite loss,
+gradient norm or parameter (:func:`transam.train.a2c.nonfinite_check`); the loop then raises
+:class:`NonFiniteError` before writing anything of that chunk, so the run keeps its last good
+checkpoint and never gets a final.json. Vmapped seeds share one program, so a seed that
+diverges stops its whole group (every diverged seed is named); its other seeds resume from
+the same checkpoint with ``--seed-mode sequential`` after the diverged seed is dealt with.
 """
 
 from __future__ import annotations
@@ -27,7 +39,6 @@ import dataclasses
 import functools
 import json
 import math
-import os
 import shutil
 import time
 from collections.abc import Callable, Iterator
@@ -39,13 +50,14 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from flax import serialization
 
 from transam.compose import make_env
 from transam.envs.core import ControlledEnv
 from transam.models import make_model
 from transam.models.base import AgentModel
 from transam.train.a2c import (
+    HEALTH_KEYS,
+    NONFINITE_QUANTITIES,
     RunnerState,
     init_runner,
     make_chunk,
@@ -54,8 +66,21 @@ from transam.train.a2c import (
 )
 from transam.train.config import ConfigError, TrainConfig, with_added_settings
 from transam.train.evaluate import make_evaluate
+from transam.train.rundir import (
+    LOCK_FILE,
+    RunInterrupted,
+    StopRequest,
+    checkpoints,
+    newest_good_checkpoint,
+    prune_checkpoints,
+    run_lock,
+    save_checkpoint,
+    stop_on_signals,
+    wait_ready,
+    write_atomic,
+    write_json,
+)
 
-KEEP_CHECKPOINTS = 2
 POPULATION_FILE = "partners.json"
 OWN_ENTRIES = ("config.json", POPULATION_FILE, "final.json", "metrics.jsonl", "tb", "checkpoints")
 
@@ -160,20 +185,6 @@ def run_programs(config: TrainConfig, vmapped: bool = False) -> Programs:
 # ---------------------------------------------------------------- files
 
 
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write to a temporary file in the same directory, then rename over ``path``."""
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
-def write_json(path: Path, obj: Any) -> None:
-    write_atomic(path, (json.dumps(obj, indent=2) + "\n").encode())
-
-
 def read_metrics(path: Path) -> list[dict[str, Any]]:
     """The records of a metrics.jsonl (a torn last line from a kill is skipped)."""
     if not path.exists():
@@ -187,30 +198,13 @@ def read_metrics(path: Path) -> list[dict[str, Any]]:
     return records
 
 
-def checkpoints(seed_dir: Path) -> dict[int, Path]:
-    """A run's checkpoint files by chunk index (what --resume, evaluation and the grid read)."""
-    found = {}
-    for p in (seed_dir / "checkpoints").glob("chunk_*.msgpack"):
-        try:
-            found[int(p.stem.split("_")[1])] = p
-        except ValueError:
-            continue
-    return found
-
-
-def _save_checkpoint(seed_dir: Path, chunk: int, state: RunnerState) -> None:
-    ckpt_dir = seed_dir / "checkpoints"
-    ckpt_dir.mkdir(parents=True, exist_ok=True)
-    write_atomic(ckpt_dir / f"chunk_{chunk:06d}.msgpack", serialization.to_bytes(state))
-
-
-def _prune_checkpoints(seed_dir: Path) -> None:
-    for _, p in sorted(checkpoints(seed_dir).items())[:-KEEP_CHECKPOINTS]:
-        p.unlink(missing_ok=True)
-
-
 class RunDirError(ConfigError):
     """The run directory holds something that the requested action would overwrite."""
+
+
+class NonFiniteError(RuntimeError):
+    """A loss, gradient norm or parameter went non-finite; the run stopped before writing
+    anything of that chunk (its last good checkpoint stays the newest)."""
 
 
 def prepare_run_dir(config: TrainConfig) -> str:
@@ -219,7 +213,7 @@ def prepare_run_dir(config: TrainConfig) -> str:
     out = Path(config.run_dir)
     if out.exists() and not out.is_dir():
         raise RunDirError(f"--out {str(out)!r} exists and is not a directory")
-    entries = {p.name for p in out.iterdir()} if out.exists() else set()
+    entries = {p.name for p in out.iterdir()} - {LOCK_FILE} if out.exists() else set()
     if not entries and config.resume and not config.force:
         raise RunDirError(
             f"--resume: no run in --out {str(out)!r} to continue; drop --resume to start one"
@@ -426,10 +420,24 @@ def train(config: TrainConfig, stop_after_chunks: int | None = None) -> RunResul
     action = prepare_run_dir(config)
     out = Path(config.run_dir)
     seeds = [config.seed + i for i in range(config.num_seeds)]
-    dirs = seed_dirs(config)
     if action == "finished":
         final = json.loads((out / "final.json").read_text())
         return RunResult(out, seeds, final["seeds"], finished=True)
+    with run_lock(out, "transam train" + (" --resume" if config.resume else "")):
+        action = prepare_run_dir(config)  # again: now no other process writes here
+        if action == "finished":
+            final = json.loads((out / "final.json").read_text())
+            return RunResult(out, seeds, final["seeds"], finished=True)
+        with stop_on_signals() as stop:
+            return _train_locked(config, action, stop, stop_after_chunks)
+
+
+def _train_locked(
+    config: TrainConfig, action: str, stop: StopRequest, stop_after_chunks: int | None
+) -> RunResult:
+    out = Path(config.run_dir)
+    seeds = [config.seed + i for i in range(config.num_seeds)]
+    dirs = seed_dirs(config)
     if out.exists() and config.force:
         _clean(out)
     if action == "fresh" or not (out / "config.json").exists():
@@ -448,8 +456,14 @@ def train(config: TrainConfig, stop_after_chunks: int | None = None) -> RunResul
     finals: list[dict[str, Any]] = [{} for _ in seeds]
     done = True
     for group in groups:
+        if stop.signum:  # arrived during the last chunk of the previous group
+            raise RunInterrupted(
+                stop.signum,
+                f"stopped by {stop.name} before seed {seeds[group[0]]} started; "
+                f"resume with --resume --out {out} (same settings)",
+            )
         finished = _run_group(
-            config, plan, [seeds[i] for i in group], [dirs[i] for i in group], budget
+            config, plan, [seeds[i] for i in group], [dirs[i] for i in group], budget, stop
         )
         done &= finished is not None
         if finished is not None:
@@ -480,8 +494,11 @@ def _run_group(
     seeds: list[int],
     dirs: list[Path],
     budget: list[int | None],
+    stop: StopRequest,
 ) -> list[dict[str, Any]] | None:
-    """Train seeds together (vmapped when several); the final records, or None when stopped."""
+    """Train seeds together (vmapped when several); the final records, or None when stopped
+    by ``budget``. Raises :class:`NonFiniteError` or, on a stop request, checkpoints and
+    raises :class:`RunInterrupted`."""
     chunks = plan.chunks
     vmapped = len(seeds) > 1
     progs = run_programs(config, vmapped)
@@ -497,17 +514,14 @@ def _run_group(
     init_keys, eval_keys = zip(*(jax.random.split(jax.random.key(s)) for s in seeds), strict=True)
     state = stack([progs.init(k) for k in init_keys])
 
-    # Resume from the newest chunk checkpointed for every seed of the group.
-    common = set.intersection(*(set(checkpoints(d)) for d in dirs))
-    start = max(common) + 1 if common else 0
-    if start:
+    # Resume from the newest chunk checkpointed, and verified, for every seed of the group.
+    start = 0
+    if any(checkpoints(d) for d in dirs):
         template = unstack(jax.device_get(state))[0]
-        state = stack(
-            [
-                serialization.from_bytes(template, checkpoints(d)[start - 1].read_bytes())
-                for d in dirs
-            ]
-        )
+        found = newest_good_checkpoint(dirs, template, quarantine=True)
+        if found is not None:
+            start, states = found[0] + 1, found[1]
+            state = stack(states)
     for d in dirs:
         kept = [r for r in read_metrics(d / "metrics.jsonl") if r.get("chunk", -1) < start]
         write_atomic(d / "metrics.jsonl", "".join(json.dumps(r) + "\n" for r in kept).encode())
@@ -529,10 +543,15 @@ def _run_group(
                     budget[0] -= 1
                 tic = time.perf_counter()
                 state, train_metrics = progs.chunks[chunks[c]](state)
-                jax.block_until_ready(state)
+                wait_ready((state, train_metrics))
+                health = jax.device_get({k: train_metrics.pop(k) for k in HEALTH_KEYS})
                 seconds = time.perf_counter() - tic
+                diverged = _nonfinite_message(health, seeds, c, plan, dirs)
+                if diverged:
+                    raise NonFiniteError(diverged)
                 ek = stack([jax.random.fold_in(k, c) for k in eval_keys])
                 ev = progs.evaluate(state.policy_params, state.model_params, ek)
+                wait_ready(ev)
                 counts = jax.device_get((state.update, state.episodes, train_metrics, ev))
                 steps = chunks[c] * plan.steps_per_update
                 last = []
@@ -544,11 +563,20 @@ def _run_group(
                     logs[i].flush()
                     writers[i].write(rec, {"perf/steps_per_s": steps / seconds})
                     last.append(rec)
-                if (c + 1) % config.checkpoint_every == 0 or c + 1 == len(chunks):
+                interrupted = stop.signum is not None and c + 1 < len(chunks)
+                every = (c + 1) % config.checkpoint_every == 0 or c + 1 == len(chunks)
+                if every or interrupted:
                     for d, s in zip(dirs, unstack(jax.device_get(state)), strict=True):
-                        _save_checkpoint(d, c, s)
+                        saved = save_checkpoint(d, c, s)
                     for d in dirs:
-                        _prune_checkpoints(d)
+                        prune_checkpoints(d)
+                if interrupted:
+                    raise RunInterrupted(
+                        stop.signum or 0,
+                        f"stopped by {stop.name} after chunk {c} of {len(chunks)} "
+                        f"(step {int(last[0]['step']):,}); checkpoint {saved} saved. Resume "
+                        f"with the same settings and --resume --out {Path(config.run_dir)}",
+                    )
                 advance(
                     steps * len(seeds),
                     sps=f"{steps * len(seeds) / seconds:,.0f}",
@@ -561,6 +589,32 @@ def _run_group(
         for w in writers:
             w.close()
     return last
+
+
+def _nonfinite_message(
+    health: dict[str, Any], seeds: list[int], chunk: int, plan: Plan, dirs: list[Path]
+) -> str | None:
+    """What went non-finite in this chunk, for which seeds (None when nothing did)."""
+    flags = np.asarray(health["nonfinite"]).reshape(len(seeds), -1)
+    updates = np.asarray(health["nonfinite_update"]).reshape(len(seeds))
+    parts = []
+    for seed, f, u in zip(seeds, flags, updates, strict=True):
+        if f.any():
+            names = ", ".join(q for q, b in zip(NONFINITE_QUANTITIES, f, strict=True) if b)
+            parts.append(
+                f"seed {seed}: non-finite {names} at update {int(u):,} "
+                f"(step {int(u) * plan.steps_per_update:,})"
+            )
+    if not parts:
+        return None
+    kept = [str(p[max(p)]) for p in map(checkpoints, dirs) if p]
+    last = f"its last good checkpoint: {', '.join(kept)}" if kept else "no checkpoint yet"
+    return (
+        f"training diverged in chunk {chunk}: {'; '.join(parts)}. The run stopped without "
+        f"writing anything of that chunk ({last}). The same settings diverge again on resume "
+        "(runs are deterministic): change the setting that caused it (e.g. a lower "
+        "--a2c.lr) and start over with --force"
+    )
 
 
 def policy_lr(config: TrainConfig, update: int) -> float:
