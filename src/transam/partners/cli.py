@@ -127,6 +127,8 @@ class PartnersDiversity:
     record: bool = False  # store the results in the shipped manifest (the README quotes it)
 
     def run(self) -> None:
+        from rich.markup import escape
+
         from transam.compose import make_env
         from transam.partners import learned
         from transam.partners.diversity import (
@@ -176,7 +178,9 @@ class PartnersDiversity:
         table.add_column("level")
         table.add_column("value", justify="right")
         table.add_column("what")
-        table.add_row("ceiling", f"{levels['ceiling']:.3f}", "E[max_a pi(a|o)] under their own obs")
+        table.add_row(
+            "ceiling", f"{levels['ceiling']:.3f}", escape("E[max_a pi(a|o)] under their own obs")
+        )
         table.add_row(
             "memoryless",
             f"{levels['memoryless']:.3f}",
