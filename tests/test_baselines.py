@@ -175,7 +175,7 @@ def test_liam_loss_is_the_formula(env: ControlledEnv, data: Any) -> None:
     np.testing.assert_allclose(total, np.mean(sse) + np.mean(nll), rtol=1e-5)
     np.testing.assert_allclose(metrics["obs_mse"], np.mean(sq), rtol=1e-5)
     np.testing.assert_allclose(metrics["action_ce"], np.mean(ce), rtol=1e-5)
-    np.testing.assert_allclose(metrics["action_accuracy"], np.mean(hits), rtol=1e-6)
+    np.testing.assert_allclose(metrics["action_accuracy_newest"], np.mean(hits), rtol=1e-6)
     # A reconstruction decoder ignores other_obs.
     z = jnp.ones((TINY.embed_dim,))
     a, b = model.decode(params, z, other), model.decode(params, z, other + 1.0)

@@ -145,9 +145,9 @@ def test_result_schema_and_files(run_dir: Path, result: dict[str, Any]) -> None:
     assert result["step"] == read_metrics(run_dir / "metrics.jsonl")[-1]["step"] == 1000
     assert result["episodes"] == EPISODES
     assert np.isfinite(result["return"]["mean"]) and result["return"]["std"] > 0
-    assert 0.0 <= result["action_accuracy"] <= 1.0 and result["obs_mse"] > 0
+    assert 0.0 <= result["action_accuracy_newest"] <= 1.0 and result["obs_mse"] > 0
     per = result["per_step"]
-    assert {len(per[k]) for k in ("cum_return", "action_accuracy", "obs_mse")} == {T}
+    assert {len(per[k]) for k in ("cum_return", "action_accuracy_newest", "obs_mse")} == {T}
     assert per["cum_return"][-1] == pytest.approx(result["return"]["mean"], rel=1e-9)
     # Spread's rewards are negative every step: the cumulative reward falls.
     assert all(b < a for a, b in zip(per["cum_return"], per["cum_return"][1:], strict=False))
@@ -252,8 +252,9 @@ def test_nam_has_no_decoder_metrics_and_no_probe(smoke_grid: Path, tmp_path: Pat
     run = tmp_path / "nam"
     shutil.copytree(smoke_grid / "runs/spread/nam/seed_0", run)
     res = evaluate_run(run, episodes=EPISODES)
-    for key in ("action_accuracy", "obs_mse", "probe", "pca"):
+    for key in ("action_accuracy_newest", "action_accuracy_all_positions", "obs_mse", "probe"):
         assert key not in res
+    assert "pca" not in res
     assert set(res["per_step"]) == {"cum_return"} and res["step"] == 1000
     assert any("no learned embedding" in note for note in res["notes"])
     assert not (run / "eval_train_pca.npz").exists()

@@ -108,7 +108,7 @@ def test_loss_matches_reference(env: ControlledEnv, batch: Any) -> None:
     model = tiny(env, pel_alpha=0.5)
     params = model.init(jax.random.key(2), env.spec)
     total, metrics = jax.jit(model.loss)(params, carry, xs, rec, None)
-    assert set(metrics) == {"action_ce", "action_accuracy", "contrastive"}
+    assert set(metrics) == {"action_ce", "action_accuracy_newest", "contrastive"}
     embed = jax.jit(jax.vmap(model.embed_rollout, in_axes=(None, 0, 1), out_axes=1))
     z = np.asarray(embed(params, carry, xs))
     labels = np.asarray(rec.partner)
@@ -128,7 +128,7 @@ def test_loss_matches_reference(env: ControlledEnv, batch: Any) -> None:
     assert 0 < paired < num_steps * n  # both cases occur (second episodes: random partners)
     dis = supcon_reference(z.reshape(num_steps * n, -1), labels.reshape(-1), TINY_B.temperature)
     np.testing.assert_allclose(metrics["action_ce"], ce, rtol=1e-5)
-    np.testing.assert_allclose(metrics["action_accuracy"], np.mean(correct), rtol=1e-6)
+    np.testing.assert_allclose(metrics["action_accuracy_newest"], np.mean(correct), rtol=1e-6)
     np.testing.assert_allclose(metrics["contrastive"], dis, rtol=1e-4)
     np.testing.assert_allclose(total, ce + 0.5 * dis, rtol=1e-5)
 
@@ -165,4 +165,4 @@ def test_both_terms_learn(env: ControlledEnv, batch: Any) -> None:
     print(f"PEL metrics {first} -> {last}")
     assert last["action_ce"] < 0.9 * first["action_ce"]
     assert last["contrastive"] < 0.9 * first["contrastive"]
-    assert last["action_accuracy"] > first["action_accuracy"]
+    assert last["action_accuracy_newest"] > first["action_accuracy_newest"]

@@ -32,6 +32,7 @@ from transam.train.config import ConfigError
 
 ACTIONS = {"transam", "liam", "cail", "pel", "transam-fuse", "transam-pool", "transam-im"}
 OBS = {"transam", "liam", "transam-fuse", "transam-pool"}
+POSITIONS = {"transam", "transam-fuse", "transam-im"}  # decode every window position
 BASE = {"tag": 0.0, "spread": -50.0, "overcooked": 40.0, "lbf": 0.5}
 EPISODE = 8  # steps of a synthetic episode
 CHUNKS = 4  # evaluation points of a synthetic training run
@@ -87,6 +88,8 @@ def write_grid(
             continue
         _, env, method, seed = rel.split("/")
         d = out / rel
+        # seed 0 writes the metric name of older runs (newest position), the others today's
+        acc_key = "action_accuracy" if seed == "seed_0" else "action_accuracy_newest"
         _write_json(d / "config.json", {"env": env, "method": method})
         final_ret = BASE[env] + ret.get(method, 0.0)
         records = []
@@ -101,7 +104,9 @@ def write_grid(
                 "eval/return_std": 1.0,
             }
             if method in ACTIONS:
-                rec["eval/action_accuracy"] = acc.get(method, 0.5) * frac
+                rec[f"eval/{acc_key}"] = acc.get(method, 0.5) * frac
+                if method in POSITIONS:
+                    rec["train/action_accuracy_all_positions"] = 0.9 * frac
             if method in OBS:
                 rec["eval/obs_mse"] = 1.0 - 0.5 * frac
             records.append(rec)
@@ -125,9 +130,11 @@ def write_grid(
             }
             if method in ACTIONS:
                 a = acc.get(method, 0.5) + 0.01 * rng.normal()
-                ev["action_accuracy"] = a
-                ev["per_step"]["action_accuracy"] = [*np.linspace(a - 0.2, a + 0.1, EPISODE - 1)]
-                ev["per_step"]["action_accuracy"].append(None)  # no episode running
+                ev[acc_key] = a
+                ev["per_step"][acc_key] = [*np.linspace(a - 0.2, a + 0.1, EPISODE - 1)]
+                ev["per_step"][acc_key].append(None)  # no episode running
+                if method in POSITIONS:
+                    ev["action_accuracy_all_positions"] = min(1.0, a + 0.2)
             if method in OBS:
                 ev["obs_mse"] = 0.5
                 ev["per_step"]["obs_mse"] = list(np.linspace(1.0, 0.2, EPISODE))
@@ -300,8 +307,17 @@ def test_full_grid_writes_every_artefact(good: tuple[Path, dict[str, Any], str])
     assert cell["metrics"]["return"]["mean"] == pytest.approx(-40.0, abs=0.5)
     assert cell["metrics"]["return"]["lo"] <= cell["metrics"]["return"]["mean"]
     assert cell["curves"]["return"]["step"] == [1000, 2000, 3000, 4000]
-    assert cell["per_step"]["action_accuracy"]["n"][-1] == 0  # the null step
-    assert "action_accuracy" not in results["cells"]["spread"]["nam"]["metrics"]
+    assert cell["per_step"]["action_accuracy_newest"]["n"][-1] == 0  # the null step
+    # seed 0's legacy ``action_accuracy`` is read as the newest-position accuracy
+    assert cell["metrics"]["action_accuracy_newest"]["seeds"] == [0, 1, 2]
+    assert cell["metrics"]["action_accuracy_all_positions"]["seeds"] == [0, 1, 2]
+    assert cell["train_curves"]["action_accuracy_all_positions"]["n"] == [3, 3, 3, 3]
+    assert "action_accuracy_all_positions" not in results["cells"]["spread"]["liam"]["metrics"]
+    assert "action_accuracy_newest" not in results["cells"]["spread"]["nam"]["metrics"]
+    assert "action_accuracy" not in results["cells"]["spread"]["transam"]["metrics"]
+    # both accuracies are shown, with which one the paper's Table 1 is compared with
+    assert "All window positions:" in md and "Newest position:" in md
+    assert "accuracy, all positions (%)" in md and "newest position, the evaluation" in md
     # the command, budget, compute and CI method are stated
     assert "transam reproduce --budget smoke" in md and "total_steps" in md
     assert "0:15:00" in md and "percentile bootstrap" in md and "10,000" in md
@@ -312,9 +328,14 @@ def test_full_grid_writes_every_artefact(good: tuple[Path, dict[str, Any], str])
     assert run["step_0"] == {
         "step_count": 1000,
         "return": [pytest.approx(-47.5, abs=1)],
-        "action_accuracy": [pytest.approx(0.225)],
+        "action_accuracy_newest": [pytest.approx(0.225)],  # seed 0: a legacy name
     }
-    assert set(run["absolute_metrics"]) == {"return", "action_accuracy", "heldout_return"}
+    assert set(run["absolute_metrics"]) == {
+        "return",
+        "action_accuracy_newest",
+        "action_accuracy_all_positions",
+        "heldout_return",
+    }
 
 
 def test_claims_hold_when_transam_is_clearly_better(
@@ -413,7 +434,7 @@ def test_partial_grid_reports_what_exists_and_lists_what_is_missing(tmp_path: Pa
     nam = cells["nam"]["metrics"]["return"]
     assert nam["source"] == "mixed" and nam["n"] == 2  # seed 1 from final.json
     assert "†" in md and "not run" in md
-    assert "action_accuracy" not in cells["nam"]["metrics"]
+    assert "action_accuracy_newest" not in cells["nam"]["metrics"]
     v = _verdicts(results)
     assert v["returns-highest"] == "inconclusive"  # TransAM has one finished seed
     assert v["accuracy-mixed-under"] == "not run"  # no LBF
@@ -427,7 +448,7 @@ def test_report_tables_match_results_json(good: tuple[Path, dict[str, Any], str]
     checked = 0
     for section, metric in (
         ("### Final return", "return"),
-        ("### Action reconstruction", "action_accuracy"),
+        ("### Action reconstruction", "action_accuracy_newest"),
         ("### Observation reconstruction", "obs_mse"),
         ("### Partner-identity probe", "probe_accuracy"),
     ):

@@ -35,14 +35,15 @@ def test_every_run_is_trained_and_evaluated(smoke: Path) -> None:
         for rec in records:  # LIAM reconstructs both; NAM has no decoder (absent, not zero)
             assert np.isfinite(rec["eval/return"]) and np.isfinite(rec["train/policy_loss"])
             assert (
-                ("eval/action_accuracy" in rec)
+                ("eval/action_accuracy_newest" in rec)
                 == ("eval/obs_mse" in rec)
                 == (spec.method == "liam")
             )
         for partners in grid.EVAL_PARTNERS:
             ev = json.loads((run / f"eval_{partners}.json").read_text())
             assert ev["episodes"] == grid.BUDGETS["smoke"].final_episodes
-            assert ("action_accuracy" in ev) == (spec.method == "liam")
+            assert ("action_accuracy_newest" in ev) == (spec.method == "liam")
+            assert "action_accuracy_all_positions" not in ev  # LIAM: one position per z
             assert (run / f"eval_{partners}.png").stat().st_size > 0
     launches = grid.read_launches(smoke, grid.RunSpec("spread", "liam", 1))
     trains = [e for e in launches if e["event"] == "train"]

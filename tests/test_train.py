@@ -134,7 +134,7 @@ class Probe:
         ce = -jnp.take_along_axis(jax.nn.log_softmax(logits), targets.other_actions, axis=-1).mean()
         mse = ((feats @ params["v"] - targets.other_obs[:, 0]) ** 2).mean()
         acc = (logits.argmax(-1) == targets.other_actions[:, 0]).mean()
-        return ce + mse, {"action_accuracy": acc, "obs_mse": mse}
+        return ce + mse, {"action_accuracy_newest": acc, "obs_mse": mse}
 
 
 def toy_config(**a2c_kw: Any) -> TrainConfig:
@@ -235,14 +235,14 @@ def test_losses_finite_and_backprop_flag_controls_encoder_grads(backprop: bool) 
     rs, metrics = chunk(rs0)
     for key in ("policy_loss", "value_loss", "entropy", "model_loss", "grad_norm/policy"):
         assert np.isfinite(metrics[key]), key
-    assert 0.0 <= metrics["model/action_accuracy"] <= 1.0
+    assert 0.0 <= metrics["model/action_accuracy_newest"] <= 1.0
     assert int(rs.update) == 20 and int(metrics["episodes"]) > 0
     assert not np.allclose(rs.model_params["w"], rs0.model_params["w"])  # model loss trains it
     moved = not np.allclose(rs.model_params["scale"], rs0.model_params["scale"])
     assert moved == backprop
     ev = make_evaluate(cfg, env, model)(rs.policy_params, rs.model_params, jax.random.key(2))  # type: ignore[arg-type]
-    assert np.isfinite(ev["return"]) and 0.0 <= ev["action_accuracy"] <= 1.0
-    assert np.isfinite(ev["obs_mse"]) and ev["per_step/action_accuracy"].shape == (3,)
+    assert np.isfinite(ev["return"]) and 0.0 <= ev["action_accuracy_newest"] <= 1.0
+    assert np.isfinite(ev["obs_mse"]) and ev["per_step/action_accuracy_newest"].shape == (3,)
 
 
 def local_steps(obs: jax.Array, t: jax.Array, first: jax.Array) -> LocalStep:
@@ -344,7 +344,8 @@ def test_run_writes_its_directory_and_beats_random(
     for rec in records:
         for key in ("train/policy_loss", "train/value_loss", "train/entropy", "eval/return"):
             assert rec[key] is not None and np.isfinite(rec[key]), key
-        assert "eval/action_accuracy" not in rec and "eval/obs_mse" not in rec  # NAM: no decoder
+        # NAM: no decoder
+        assert "eval/action_accuracy_newest" not in rec and "eval/obs_mse" not in rec
     # A uniformly random policy (actor head zeroed) on the same evaluation episodes.
     random_return = uniform_policy_eval(cfg, cfg.seed, RUN_CHUNKS - 1)["return"]
     trained = records[-1]["eval/return"]

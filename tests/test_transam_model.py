@@ -18,7 +18,7 @@ from transam import envs
 from transam.compose import make_env
 from transam.envs.core import ControlledEnv, PartnerRecord
 from transam.models import BaselineConfig, make_model
-from transam.models.base import LocalStep
+from transam.models.base import ACC_ALL, ACC_NEWEST, MSE_ALL, LocalStep, position_metrics
 from transam.models.transam import TransAM, TransAMConfig, WindowCarry
 from transam.train.config import ConfigError, TrainConfig
 
@@ -288,7 +288,7 @@ def test_recon_targets_line_up(env: ControlledEnv, traj: Any) -> None:
     valid, pred_obs, logits = np.asarray(valid), np.asarray(pred_obs), np.asarray(logits)
     tgt_obs = np.asarray(sr.other_obs).reshape(stop - start, -1)
     tgt_act = np.asarray(sr.other_actions)
-    terms, newest = [], []
+    terms, newest, hits, errs = [], [], [], []
     for i in range(stop - start):
         for pos in range(k):
             j = i + pos - (k - 1)
@@ -299,16 +299,61 @@ def test_recon_targets_line_up(env: ControlledEnv, traj: Any) -> None:
             ce = -np.mean(logp[np.arange(env.spec.num_others), tgt_act[j]])
             mse = np.mean((pred_obs[i, pos] - tgt_obs[j]) ** 2)
             terms.append(mse + ce)
+            hit = np.mean(logits[i, pos].argmax(-1) == tgt_act[j])
+            hits.append(hit)
+            errs.append(mse)
             if pos == k - 1:
-                newest.append((mse, ce))
+                newest.append((mse, ce, hit))
     assert stop - start < len(terms) < (stop - start) * k  # early positions are skipped
     np.testing.assert_allclose(total, np.mean(terms), rtol=1e-5)
-    np.testing.assert_allclose(metrics["obs_mse"], np.mean([m for m, _ in newest]), rtol=1e-5)
-    np.testing.assert_allclose(metrics["action_ce"], np.mean([c for _, c in newest]), rtol=1e-5)
+    np.testing.assert_allclose(metrics["obs_mse"], np.mean([m for m, _, _ in newest]), rtol=1e-5)
+    np.testing.assert_allclose(metrics["action_ce"], np.mean([c for _, c, _ in newest]), rtol=1e-5)
+    np.testing.assert_allclose(metrics[ACC_NEWEST], np.mean([h for _, _, h in newest]), rtol=1e-6)
+    np.testing.assert_allclose(metrics[ACC_ALL], np.mean(hits), rtol=1e-6)
+    np.testing.assert_allclose(metrics[MSE_ALL], np.mean(errs), rtol=1e-5)
     # recon_at="last": the loss is exactly the newest-position terms the metrics report.
     last = dataclasses.replace(model, config=dataclasses.replace(model.config, recon_at="last"))
     total_last, m_last = loss(last, params, carry, sx, sr)
     np.testing.assert_allclose(total_last, m_last["obs_mse"] + m_last["action_ce"], rtol=1e-6)
+
+
+def test_newest_and_all_positions_accuracy_differ_when_only_older_positions_are_right() -> None:
+    """The bidirectional window's look-ahead: older positions right, the newest wrong."""
+    actions = jnp.array([[[1, 2], [3, 4], [0, 1]]] * 2)  # [T=2, P=3, N=2]
+    logits = jax.nn.one_hot(actions, 5) * 10.0
+    wrong = (actions[:, -1] + 1) % 5
+    logits = logits.at[:, -1].set(jax.nn.one_hot(wrong, 5) * 10.0)  # newest predicts wrongly
+    valid = jnp.ones((2, 3), bool)
+    m = position_metrics(logits, actions, valid)
+    assert float(m[ACC_NEWEST]) == 0.0
+    assert float(m[ACC_ALL]) == pytest.approx(2 / 3)
+    # Invalid positions (padding, before the rollout) do not count; the newest always does.
+    m = position_metrics(logits, actions, valid.at[0, 0].set(False))
+    assert float(m[ACC_ALL]) == pytest.approx(3 / 5)
+    err = jnp.array([[1.0, 2.0, 3.0], [1.0, 2.0, 3.0]])
+    m = position_metrics(logits, actions, valid, err)
+    assert float(m["obs_mse"]) == 3.0 and float(m[MSE_ALL]) == pytest.approx(2.0)
+
+
+def test_final_evaluation_scores_every_window_position(env: ControlledEnv) -> None:
+    """The all-positions metric of the final evaluation: K = 1 equals the newest; K = 3 is
+    scored and lies in [0, 1]; a pooled model has none."""
+    from transam.train.a2c import init_runner
+    from transam.train.evaluate import make_episodes
+
+    cfg = TrainConfig(env="spread", method="transam")
+    got = {}
+    for name, context, pool in (("k1", 1, "last"), ("k3", 3, "last"), ("pool", 3, "mean")):
+        tcfg = dataclasses.replace(TINY, context=context, layers=1, pool=pool)
+        model = TransAM(env.spec, tcfg)
+        rs = init_runner(cfg, env, model, jax.random.key(0))
+        run = jax.jit(make_episodes(cfg, env, model, 4, positions=True))
+        got[name] = jax.device_get(run(rs.policy_params, rs.model_params, jax.random.key(1), None))
+    k1, k3 = got["k1"].scores, got["k3"].scores
+    np.testing.assert_allclose(k1[ACC_ALL], k1[ACC_NEWEST], atol=1e-6)
+    np.testing.assert_allclose(k1[MSE_ALL], k1["obs_mse"], rtol=1e-5)
+    assert 0.0 <= float(k3[ACC_ALL].mean()) <= 1.0 and not np.allclose(k3[MSE_ALL], k3["obs_mse"])
+    assert ACC_ALL not in got["pool"].scores and ACC_NEWEST in got["pool"].scores
 
 
 def test_default_size_and_finite_loss(env: ControlledEnv, traj: Any) -> None:
@@ -329,7 +374,7 @@ def test_default_size_and_finite_loss(env: ControlledEnv, traj: Any) -> None:
     sx, sr = take(xs, slice(20, 30)), take(rec, slice(20, 30))
     value, metrics = loss(model, params, model.init_carry(env.spec), sx, sr)
     assert np.isfinite(value) and all(np.isfinite(v) for v in metrics.values())
-    assert set(metrics) == {"obs_mse", "action_ce", "action_accuracy"}
+    assert set(metrics) == {"obs_mse", "action_ce", ACC_NEWEST, ACC_ALL, MSE_ALL}
 
 
 def count(tree: Any) -> int:
@@ -392,6 +437,9 @@ def test_pooled_z_is_what_the_decoder_learns(env: ControlledEnv, traj: Any) -> N
     np.testing.assert_allclose(total, np.mean(mse + ce), rtol=1e-5)
     np.testing.assert_allclose(metrics["obs_mse"], np.mean(mse), rtol=1e-5)
     np.testing.assert_allclose(metrics["action_ce"], np.mean(ce), rtol=1e-5)
+    assert ACC_ALL not in metrics and MSE_ALL not in metrics  # one pooled z: no positions
+    with pytest.raises(ValueError, match="pooled"):
+        model.decode_window(params, carry, sr.other_obs[:1])
     last = TransAM(env.spec, dataclasses.replace(POOL, recon_at="last"))
     np.testing.assert_allclose(loss(last, params, carry, sx, sr)[0], total, rtol=1e-6)
 
@@ -415,7 +463,7 @@ def test_imitation_decoder_uses_other_obs(env: ControlledEnv, traj: Any) -> None
         model.decode(params, z[0])
 
     total, metrics = loss(model, params, carry, sx, sr)
-    assert set(metrics) == {"action_ce", "action_accuracy"}
+    assert set(metrics) == {"action_ce", ACC_NEWEST, ACC_ALL}
     win = model._windows(carry, sx)
     valid, emb = np.asarray(win.valid), model._encode(params, win)
     terms, newest = [], []
@@ -522,7 +570,7 @@ def test_reconstruction_learns_on_spread(
     majority = float(np.mean([c.max() / c.sum() for c in counts]))
     print(
         f"held-out loss {float(loss0):.3f} -> {float(loss1):.3f}; action accuracy "
-        f"{float(m0['action_accuracy']):.3f} -> {float(m1['action_accuracy']):.3f} "
+        f"{float(m0['action_accuracy_newest']):.3f} -> {float(m1['action_accuracy_newest']):.3f} "
         f"(per-agent majority class {majority:.3f}); obs mse {m1.get('obs_mse')}"
     )
     assert np.all(np.isfinite(losses))
@@ -530,4 +578,4 @@ def test_reconstruction_learns_on_spread(
     ratio = 0.6 if config.decoder == "reconstruct" else 0.85
     assert float(loss1) < ratio * float(loss0)
     assert float(np.mean(losses[-20:])) < ratio * float(losses[0])
-    assert float(m1["action_accuracy"]) > majority + 0.05
+    assert float(m1["action_accuracy_newest"]) > majority + 0.05

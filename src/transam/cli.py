@@ -332,14 +332,14 @@ def _run_train(config: TrainConfig) -> bool:
         console.print(f"stopped early; resume with --resume --out {result.run_dir}")
         return False
     table = Table(title=f"final evaluation: {config.env} / {config.method}")
-    for col in ("seed", "step", "eval return", "std", "action acc", "obs mse"):
+    for col in ("seed", "step", "eval return", "std", "action acc (newest)", "obs mse"):
         table.add_column(col, justify="right")
     for seed, rec in zip(result.seeds, result.final, strict=True):
         table.add_row(
             str(seed),
             f"{rec.get('step', 0):,}",
             *(_opt(rec.get(f"eval/{k}")) for k in ("return", "return_std")),
-            *(_opt(rec.get(f"eval/{k}")) for k in ("action_accuracy", "obs_mse")),
+            *(_opt(rec.get(f"eval/{k}")) for k in ("action_accuracy_newest", "obs_mse")),
         )
     console.print(table)
     console.print(

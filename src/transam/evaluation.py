@@ -13,8 +13,15 @@ variance of the partner mix from the mean return and gives the probe balanced cl
 
 Per-step curves (index t = 0 .. T-1 within the episode): ``cum_return[t]`` is the mean over
 all episodes of the reward summed up to and including step t (an episode that ended keeps its
-return, so the last value is the mean return); ``action_accuracy[t]`` and ``obs_mse[t]`` are
-means over the episodes still running at step t (null where none is).
+return, so the last value is the mean return); the metric curves ``[t]`` are means over the
+episodes still running at step t (null where none is).
+
+Agent-modeling metrics (:data:`EVAL_METRICS`, each only where the model predicts it):
+``action_accuracy_newest`` and ``obs_mse``, the decoder on the z the policy acted on (the
+newest window position; the authors' evaluation metric), and, for methods that decode every
+window position (TransAM, -fuse, -im), ``action_accuracy_all_positions`` and
+``obs_mse_all_positions``, the authors' training-time form, where later observations in the
+bidirectional window reveal older positions' answers (see :mod:`transam.train.evaluate`).
 
 Representation quality. A linear probe predicts the partner index from the embedding z_t the
 policy acted on at step t (TransAM's E^o_t; each baseline's own z), separately for every t:
@@ -31,8 +38,8 @@ and ``trained_population_digest`` (the shipped population's fingerprint now and 
 partners.json's; None for scripted partners or runs older than that file), ``checkpoint`` (path
 relative to the run directory: the named one, or the newest that verifies, any newer one that
 does not being named in ``notes``), ``step``, ``episodes``, ``greedy``, ``return`` {mean, std},
-``action_accuracy`` and ``obs_mse`` (only where the model predicts them),
-``per_partner_return`` {team: mean}, ``per_step`` {cum_return, action_accuracy?, obs_mse?},
+the :data:`EVAL_METRICS` the model predicts, ``per_partner_return`` {team: mean},
+``per_step`` {cum_return, and a curve per metric present},
 ``probe`` {accuracy, per_step, chance, train_episodes, test_episodes, features, ridge} and
 ``pca`` {explained_variance} (both absent without an embedding), ``notes`` [str].
 """
@@ -56,6 +63,7 @@ import jax.numpy as jnp
 import numpy as np
 import tyro
 
+from transam.models.base import ACC_ALL, ACC_NEWEST, MSE_ALL
 from transam.train.config import ConfigError, TrainConfig, with_added_settings
 
 EvalPartners = Literal["train", "heldout"]
@@ -64,6 +72,9 @@ PROBE_RIDGE = 1.0
 """Ridge penalty of the probe, on standardised features (unit variance each): small next to
 the ~N/2 training episodes, so it only regularises directions the data barely constrain (with
 embed_dim > N/2 the unpenalised least squares would interpolate the training half)."""
+EVAL_METRICS = (ACC_NEWEST, ACC_ALL, "obs_mse", MSE_ALL)
+"""The agent-modeling metrics an evaluation may hold (older files: ``action_accuracy``, the
+newest position's, see :data:`~transam.models.base.LEGACY_METRICS`)."""
 NO_EMBEDDING = frozenset({"nam"})
 """Methods whose z is not a learned representation (NAM: the one-hot previous action)."""
 
@@ -254,7 +265,7 @@ def _program(config: TrainConfig, n: int) -> Callable[..., Any]:
     from transam.train.loop import env_and_model
 
     env, model = env_and_model(config)
-    return jax.jit(make_episodes(config, env, model, n))
+    return jax.jit(make_episodes(config, env, model, n, positions=True))
 
 
 def _restore(
@@ -393,7 +404,7 @@ def _evaluate_locked(
         "return": {"mean": float(returns.mean()), "std": float(returns.std())},
     }
     per_step: dict[str, Any] = {"cum_return": [float(v) for v in reward.cumsum(0).mean(1)]}
-    for key in ("action_accuracy", "obs_mse"):
+    for key in EVAL_METRICS:
         if key in ep.scores:
             score = np.asarray(ep.scores[key], np.float64)
             out[key] = float(score.sum() / live.sum())
@@ -448,7 +459,9 @@ def _figure(
     from matplotlib.figure import Figure
 
     per = result["per_step"]
-    curves = [("cum_return", "cumulative reward"), ("action_accuracy", "action accuracy")]
+    curves = [("cum_return", "cumulative reward")]
+    curves += [(ACC_NEWEST, "action accuracy, newest position")]
+    curves += [(ACC_ALL, "action accuracy, all window positions")]
     curves += [("obs_mse", "observation MSE")]
     panels = [(k, label) for k, label in curves if k in per]
     if "probe" in result:
@@ -543,7 +556,7 @@ class Evaluate:
         table.add_column("metric")
         table.add_column("value", justify="right")
         table.add_row("return", f"{res['return']['mean']:.4g} ± {res['return']['std']:.3g}")
-        for key in ("action_accuracy", "obs_mse"):
+        for key in EVAL_METRICS:
             if key in res:
                 table.add_row(key.replace("_", " "), f"{res[key]:.4g}")
         if "probe" in res:

@@ -25,6 +25,8 @@ import numpy as np
 
 PolicyFn = Callable[[jax.Array, jax.Array], jax.Array]
 """One agent's policy: (PRNG key, its own observation) -> int32 action."""
+ProbsFn = Callable[[jax.Array], jax.Array]
+"""One agent's action probabilities [num_actions] from its own observation."""
 
 
 @dataclass(frozen=True)
@@ -34,6 +36,9 @@ class Member:
     name: str
     act: PolicyFn
     kind: str = "heuristic"  # "heuristic" or a learned recipe name
+    probs: ProbsFn | None = None
+    """The distribution ``act`` draws from, where known (learned members); None: not declared
+    (heuristics), so a measurement that needs it samples ``act`` instead."""
 
 
 @dataclass(frozen=True)

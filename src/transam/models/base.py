@@ -26,6 +26,7 @@ from __future__ import annotations
 from typing import Any, Protocol
 
 import jax
+import jax.numpy as jnp
 from flax import struct
 
 from transam.envs.core import GameSpec, PartnerRecord
@@ -51,6 +52,48 @@ class PartnerView:
 
     other_obs: jax.Array  # o^{-1}_t [num_others, other_obs_dim]
     other_prev_actions: jax.Array  # a^{-1}_{t-1} [num_others] int32, -1 at an episode's start
+
+
+ACC_NEWEST = "action_accuracy_newest"
+"""Accuracy of the prediction at the newest window position (what execution uses: z_t against
+a^{-1}_t). Every method with an action decoder logs it; comparable across methods."""
+ACC_ALL = "action_accuracy_all_positions"
+"""Accuracy over every valid position of every window (the authors' training chart). Only
+methods that decode each window position log it (TransAM, -fuse, -im): the window is
+bidirectional, so at older positions later observations reveal the answer. A method with one
+decoded embedding per step (LIAM, CAIL, PEL, TransAM-pool) has no such metric: absent, not
+equal to the newest (an equal number would read as a look-ahead it does not have)."""
+MSE_ALL = "obs_mse_all_positions"
+"""The observation-MSE analogue of :data:`ACC_ALL`; plain ``obs_mse`` is the newest position's."""
+LEGACY_METRICS = {"action_accuracy": ACC_NEWEST}
+"""Metric names of older runs -> today's: ``action_accuracy`` was always the newest
+position's (in training and in evaluation)."""
+
+
+def position_metrics(
+    logits: jax.Array,
+    actions: jax.Array,
+    valid: jax.Array,
+    obs_err: jax.Array | None = None,
+) -> dict[str, jax.Array]:
+    """Action accuracy at the newest position and over all valid positions of each window.
+
+    ``logits`` [..., P, N, A], ``actions`` [..., P, N] (targets of each position), ``valid``
+    [..., P] (which positions count for the all-positions mean; the newest, P-1, always counts
+    for the newest mean), ``obs_err`` [..., P] an optional per-position observation MSE.
+    Returns :data:`ACC_NEWEST` and :data:`ACC_ALL` (and ``obs_mse`` / :data:`MSE_ALL`).
+    """
+    correct = jnp.mean((jnp.argmax(logits, -1) == actions).astype(jnp.float32), -1)  # [..., P]
+    w = valid.astype(jnp.float32)
+    count = jnp.maximum(jnp.sum(w), 1.0)
+    out = {
+        ACC_NEWEST: jnp.mean(correct[..., -1]),
+        ACC_ALL: jnp.sum(correct * w) / count,
+    }
+    if obs_err is not None:
+        out["obs_mse"] = jnp.mean(obs_err[..., -1])
+        out[MSE_ALL] = jnp.sum(obs_err * w) / count
+    return out
 
 
 Decoded = tuple[jax.Array | None, jax.Array | None]
@@ -106,7 +149,7 @@ class AgentModel(Protocol):
         targets: PartnerRecord,
         key: jax.Array | None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
-        """Auxiliary loss and its scalar metrics (e.g. ``action_accuracy``, ``obs_mse``) over a
+        """Auxiliary loss and its scalar metrics (e.g. :data:`ACC_NEWEST`, ``obs_mse``) over a
         batch of rollouts: ``carry`` [N, ...] (before each rollout), ``xs`` and ``targets``
         time-major [T, N, ...], lined up in time. ``key`` enables dropout (None: deterministic).
         Zero and no metrics for models without one."""

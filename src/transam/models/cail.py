@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import optax
 
 from transam.envs.core import PartnerRecord
-from transam.models.base import Decoded, LocalStep, Params
+from transam.models.base import ACC_NEWEST, Decoded, LocalStep, Params
 from transam.models.heads import ImitationHead
 from transam.models.recurrent import LSTMCarry, RecurrentModel
 
@@ -65,5 +65,5 @@ class CAIL(RecurrentModel):
         total = jnp.mean(ce)
         return total, {
             "action_ce": total,
-            "action_accuracy": jnp.mean(correct.astype(jnp.float32)),
+            ACC_NEWEST: jnp.mean(correct.astype(jnp.float32)),
         }

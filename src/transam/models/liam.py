@@ -12,7 +12,8 @@ Faithful to the LIAM code (``predator_prey/models.py``, ``agent.py``):
   The NLL is a cross-entropy on logits (LIAM takes log of a softmax: the same value).
 * Deterministic: no sampling, no KL (LIAM's repo has an unused ``kl_coeff``); ``key`` is unused.
 * Metrics, comparable with TransAM's: ``obs_mse`` the mean squared error per element,
-  ``action_ce`` the cross-entropy averaged over the other agents, ``action_accuracy``.
+  ``action_ce`` the cross-entropy averaged over the other agents, ``action_accuracy_newest``
+  (one decoded step per z: no all-positions metric, see ``transam.models.base.ACC_ALL``).
 
 Not copied: LIAM clips the encoder's and decoder's gradients separately; the trainer clips the
 agent model's parameters as one (its ``max_grad_norm``).
@@ -29,7 +30,7 @@ import jax.numpy as jnp
 import optax
 
 from transam.envs.core import PartnerRecord
-from transam.models.base import Decoded, LocalStep, Params
+from transam.models.base import ACC_NEWEST, Decoded, LocalStep, Params
 from transam.models.recurrent import LSTMCarry, RecurrentModel
 
 
@@ -97,6 +98,6 @@ class LIAM(RecurrentModel):
         metrics = {
             "obs_mse": jnp.mean(sq),
             "action_ce": jnp.mean(ce),
-            "action_accuracy": jnp.mean(correct.astype(jnp.float32)),
+            ACC_NEWEST: jnp.mean(correct.astype(jnp.float32)),
         }
         return total, metrics

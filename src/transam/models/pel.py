@@ -21,8 +21,9 @@ Design (choices the sources leave open):
   environment in index order, cyclically). Where no other environment has that partner at that
   step (with 13 Spread partners and 10 envs, about half the steps) the step's own z is used, so
   every step trains the decoder. Gradients reach both encoders' passes. The metrics
-  ``action_ce`` / ``action_accuracy`` are this loss's (paired z); evaluation's ``decode`` uses
-  the own z, as execution has only that.
+  ``action_ce`` / ``action_accuracy_newest`` are this loss's (paired z); evaluation's
+  ``decode`` uses the own z, as execution has only that. One pooled z per window: no
+  all-positions metric.
 * Discriminative loss: :func:`~transam.models.heads.supervised_contrastive` over all T x N
   window embeddings of the batch (cosine similarity over ``BaselineConfig.temperature``),
   labels = partner index of each step's episode: positives are every other window with the
@@ -42,7 +43,7 @@ import jax.numpy as jnp
 import optax
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import Decoded, LocalStep, Params
+from transam.models.base import ACC_NEWEST, Decoded, LocalStep, Params
 from transam.models.config import BaselineConfig
 from transam.models.heads import supervised_contrastive
 from transam.models.transam import TransAM, TransAMConfig, WindowCarry
@@ -133,7 +134,7 @@ class PEL:
         correct = jnp.argmax(logits, axis=-1) == actions
         metrics = {
             "action_ce": ce,
-            "action_accuracy": jnp.mean(correct.astype(jnp.float32)),
+            ACC_NEWEST: jnp.mean(correct.astype(jnp.float32)),
             "contrastive": dis,
         }
         return ce + self.baseline.pel_alpha * dis, metrics

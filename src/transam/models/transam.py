@@ -22,6 +22,11 @@
   positions holding steps from before the rollout (their targets are not in this rollout's
   data; they were supervised in the previous rollout), so a step early in a rollout is
   supervised in more windows than a late one.
+* Metrics (:func:`~transam.models.base.position_metrics`): ``action_accuracy_newest`` (and
+  ``action_ce``, ``obs_mse``) at each window's newest position, what execution decodes and
+  evaluation scores; ``action_accuracy_all_positions`` and ``obs_mse_all_positions`` over
+  every valid position, what the authors chart in training. At an older position the later
+  observations in the (bidirectional) window reveal the answer, so the second is higher.
 * Padding: the reference fills padded action slots with a constant; here padded entries are
   masked and zeroed, so their content is irrelevant.
 
@@ -58,7 +63,14 @@ import optax
 from flax import struct
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import Decoded, LocalStep, Params
+from transam.models.base import (
+    ACC_ALL,
+    MSE_ALL,
+    Decoded,
+    LocalStep,
+    Params,
+    position_metrics,
+)
 from transam.models.heads import ImitationHead
 
 
@@ -417,6 +429,23 @@ class TransAM:
             raise ValueError("TransAM's imitation decoder needs other_obs (o^{-1}_t)")
         return None, cast(jax.Array, self._head().apply(variables, z, other_obs))
 
+    @property
+    def decodes_positions(self) -> bool:
+        """True when each window position has its own decoded embedding (not ``pool="mean"``),
+        so an all-positions accuracy exists (see :data:`~transam.models.base.ACC_ALL`)."""
+        return self.config.pool == "last"
+
+    def decode_window(
+        self, params: Params, carry: WindowCarry, other_obs: jax.Array
+    ) -> tuple[Decoded, jax.Array]:
+        """The decoder at every position of the window in ``carry`` (one env, [K, ...]):
+        ((obs [K, N*D] | None, logits [K, N, A]), valid [K]). ``other_obs`` [K, N, D] is each
+        position's o^{-1} (the imitation decoder's input). For the all-positions evaluation
+        metric; requires :attr:`decodes_positions`."""
+        if not self.decodes_positions:
+            raise ValueError(f"{self.name} decodes one pooled z per window, not its positions")
+        return self.decode(params, self._encode(params, carry), other_obs), carry.valid
+
     def loss(
         self,
         params: Params,
@@ -449,8 +478,13 @@ class TransAM:
         MSE (mean over the joint observation's elements; not with ``decoder="imitate"``) + mean
         over the other agents of the cross-entropy of their action logits (the imitation decoder
         also gets o^{-1}_j). With ``pool="mean"`` the decoded embedding is the pooled z_i (what
-        the policy and ``decode`` see), scored against step i only. Metrics use the newest
-        positions only (what execution uses).
+        the policy and ``decode`` see), scored against step i only.
+
+        Metrics: ``action_accuracy_newest``, ``action_ce`` and ``obs_mse`` at the newest
+        position of each window (what execution uses); ``action_accuracy_all_positions`` and
+        ``obs_mse_all_positions`` over every valid position with targets (j >= 0), whatever
+        ``recon_at`` trains: the authors' training accuracy, which the window's look-ahead
+        inflates. Absent with ``pool="mean"`` (one decoded embedding per window).
         """
         k = self.config.context
         num_steps = xs.obs.shape[0]
@@ -471,16 +505,19 @@ class TransAM:
         assert logits is not None  # both decoders predict actions
         ce_each = optax.softmax_cross_entropy_with_integer_labels(logits, tgt_act)  # [T, P, N]
         ce = jnp.mean(ce_each, axis=-1)
-        correct = jnp.argmax(logits[:, -1], axis=-1) == tgt_act[:, -1]
-        metrics = {
-            "action_ce": jnp.mean(ce[:, -1]),
-            "action_accuracy": jnp.mean(correct.astype(jnp.float32)),
-        }
         per_position = ce
+        mse = None
         if pred_obs is not None:
             tgt_obs = tgt_other.reshape(*tgt_other.shape[:2], -1)
             mse = jnp.mean((pred_obs - tgt_obs) ** 2, axis=-1)  # [T, P]
             per_position = per_position + mse
-            metrics["obs_mse"] = jnp.mean(mse[:, -1])
+        # Metrics: newest position, and every valid position with targets (whatever recon_at
+        # trains); one pooled z per window has no positions to average over.
+        pooled = self.config.pool == "mean"
+        scored = jnp.ones(j.shape, bool) if pooled else win.valid & (j >= 0)
+        metrics = position_metrics(logits, tgt_act, scored, mse)
+        if pooled:
+            metrics = {name: v for name, v in metrics.items() if name not in (ACC_ALL, MSE_ALL)}
+        metrics["action_ce"] = jnp.mean(ce[:, -1])
         total = jnp.sum(per_position * weight) / jnp.maximum(jnp.sum(weight), 1.0)
         return total, metrics

@@ -5,6 +5,7 @@ Wire into ``transam.cli`` as ``Annotated[Partners, tyro.conf.subcommand("partner
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -133,26 +134,45 @@ class PartnersShow:
 
 @dataclass
 class PartnersDiversity:
-    """Cross-play matrix (LBF, Overcooked) and partner-index classifier accuracy vs chance."""
+    """Cross-play matrix (LBF, Overcooked), partner-index classifier accuracy vs chance, and the
+    partners' action-accuracy levels: the ceiling E[max_a pi(a|o)] and the memoryless,
+    team-agnostic level (an MLP from a partner's own observation, pooled over teams)."""
 
     env: tyro.conf.Positional[EnvName]
     heldout: bool = False
+    heuristic: bool = False  # the scripted population (partners="heuristic") instead
     window: int = 10  # steps per classifier sample
-    record: bool = False  # store the accuracies in the shipped manifest (the README quotes it)
+    record: bool = False  # store the results in the shipped manifest (the README quotes it)
 
     def run(self) -> None:
+        from rich.markup import escape
+
         from transam.compose import make_env
         from transam.partners import learned
-        from transam.partners.diversity import ClassifierConfig, cross_play, partner_id_accuracy
+        from transam.partners.diversity import (
+            ClassifierConfig,
+            LevelsConfig,
+            action_levels,
+            cross_play,
+            partner_id_accuracy,
+        )
 
-        split = _split(self.heldout)
-        env = make_env(self.env, population=learned.population(self.env, split))
+        if self.heuristic and (self.heldout or self.record):
+            raise SystemExit(
+                "error: --heuristic measures the scripted population, which has no manifest "
+                "entry: it takes neither --heldout nor --record"
+            )
+        split = "heuristic" if self.heuristic else _split(self.heldout)
+        if self.heuristic:
+            env = make_env(self.env, partners="heuristic")
+        else:
+            env = make_env(self.env, population=learned.population(self.env, split))
         if not 1 <= self.window <= env.spec.episode_len:
             raise SystemExit(
                 f"error: --window must be between 1 and {self.env}'s episode length "
                 f"{env.spec.episode_len} (a window stays inside one episode), got {self.window}"
             )
-        if self.env in ("lbf", "overcooked"):
+        if self.env in ("lbf", "overcooked") and not self.heuristic:
             members = learned.learned_members(self.env, split)
             names = list(members)
             mat = cross_play(self.env, [members[n] for n in names])
@@ -170,6 +190,32 @@ class PartnersDiversity:
             f"{acc['local']:.3f}, "
             f"chance {acc['chance']:.3f} ({acc['teams']} teams, window {self.window})"
         )
+        lv_cfg = LevelsConfig()
+        levels = action_levels(env, lv_cfg)
+        table = Table(title=f"{self.env} {split}: partners' action-accuracy levels")
+        table.add_column("level")
+        table.add_column("value", justify="right")
+        table.add_column("what")
+        table.add_row(
+            "ceiling", f"{levels['ceiling']:.3f}", escape("E[max_a pi(a|o)] under their own obs")
+        )
+        table.add_row(
+            "memoryless",
+            f"{levels['memoryless']:.3f}",
+            "MLP: partner's own obs + slot -> action, pooled over teams (held out)",
+        )
+        table.add_row("majority", f"{levels['majority']:.3f}", "each slot's most frequent action")
+        console.print(table)
+        sampled = set(levels["sampled"])
+        console.print(
+            "member ceilings: "
+            + ", ".join(
+                f"{n} {v:.3f}" + ("*" if n in sampled else "") for n, v in levels["members"].items()
+            )
+            + f" (* measured by sampling act {lv_cfg.samples}x per obs; others from their "
+            f"probabilities); {lv_cfg.episodes_per_team} episodes per team, {levels['steps']:,} "
+            "partner steps, random controlled agent"
+        )
         if self.record:
             found = {
                 "partner_id_accuracy_others": round(acc["others"], 3),
@@ -178,6 +224,12 @@ class PartnersDiversity:
                 "teams": acc["teams"],
                 "window": self.window,
                 "episodes_per_team": ClassifierConfig().episodes_per_team,
+                "action_ceiling": round(levels["ceiling"], 4),
+                "memoryless_accuracy": round(levels["memoryless"], 4),
+                "majority_rate": round(levels["majority"], 4),
+                "member_ceilings": {n: round(v, 4) for n, v in levels["members"].items()},
+                "ceiling_sampled": levels["sampled"],
+                "levels_settings": dataclasses.asdict(lv_cfg),
                 "measured_by": f"transam partners diversity {self.env}"
                 + (" --heldout" if self.heldout else ""),
                 "population_digest": learned.digest(self.env, split),

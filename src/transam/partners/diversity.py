@@ -7,6 +7,22 @@
   top-1 accuracy next to chance (1 / M).
 * ``cross_play``: mean score of member i (partner slot) with member j in the stand-in's slot,
   for the games where learned members can fill the controlled slot (LBF, Overcooked).
+* ``action_levels``: where the agent models' action accuracy can lie, from the partners' steps
+  under a uniformly random controlled agent (whole episodes, every team equally often):
+
+  - the *ceiling* E[max_a pi(a | o)] of the partners under their own observations, averaged
+    over teams, slots and steps: no predictor of their actions can expect more, even knowing
+    the team and the partner's observation (1 for deterministic members). A member that
+    declares its distribution (``Member.probs``: learned members) gives it exactly; for one
+    that does not (heuristics), ``act`` is sampled ``samples`` times per observation and the
+    most frequent action of one half is scored on the other half (a deterministic member
+    scores exactly 1; a stochastic one is not inflated by picking the winner on the data
+    that scores it, and reads slightly low where the first half picks a runner-up);
+  - the *memoryless, team-agnostic* level: the held-out accuracy of an MLP predicting a
+    partner's action from that partner's current observation and slot alone, trained pooled
+    over all teams (every 4th episode of each team held out). A model at this level has
+    learned nothing about whom it plays with; ``majority`` (each slot's most frequent action)
+    gives the scale.
 """
 
 from __future__ import annotations
@@ -21,7 +37,7 @@ import numpy as np
 import optax
 
 from transam.envs.core import ControlledEnv
-from transam.envs.population import Member
+from transam.envs.population import Member, Population
 from transam.partners.train import apply
 
 
@@ -76,9 +92,16 @@ class Classifier(nn.Module):
         return nn.Dense(self.classes)(x)
 
 
-def fit_accuracy(x: np.ndarray, y: np.ndarray, classes: int, cfg: ClassifierConfig) -> float:
-    """Held-out top-1 accuracy of a 2-layer MLP (every 4th sample of each class is test)."""
-    test = np.arange(len(y)) % 4 == 0
+def fit_accuracy(
+    x: np.ndarray,
+    y: np.ndarray,
+    classes: int,
+    cfg: ClassifierConfig,
+    test: np.ndarray | None = None,
+) -> float:
+    """Held-out top-1 accuracy of a 2-layer MLP (``test``: the held-out samples; default every
+    4th sample)."""
+    test = np.arange(len(y)) % 4 == 0 if test is None else np.asarray(test, bool)
     mean, std = x[~test].mean(0), x[~test].std(0) + 1e-6
     xs = (x - mean) / std
     net = Classifier(cfg.hidden, classes)
@@ -148,3 +171,166 @@ def cross_play(env: str, members: list[Member], episodes: int = 16) -> np.ndarra
     ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     fn = jax.jit(jax.vmap(pair))
     return np.asarray(fn(jnp.asarray(ii.ravel()), jnp.asarray(jj.ravel()))).reshape(n, n)
+
+
+# ---------------------------------------------------------------- action levels
+
+
+@dataclass(frozen=True)
+class LevelsConfig:
+    """Settings of :func:`action_levels`."""
+
+    episodes_per_team: int = 64
+    """whole episodes per team (3/4 train the memoryless classifier, 1/4 test it)"""
+    samples: int = 64
+    """draws of ``act`` per observation for a member without declared probabilities"""
+    hidden: int = 128
+    train_steps: int = 2000
+    lr: float = 1e-3
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class PartnerSteps:
+    """The partners' observations and actions over whole episodes, one team per episode."""
+
+    obs: np.ndarray  # [E, T, N, D] each partner's own observation
+    actions: np.ndarray  # [E, T, N] int
+    team: np.ndarray  # [E] team index
+    live: np.ndarray  # [E, T] bool: the step belongs to the episode
+    episode: np.ndarray  # [E] index of the episode within its team
+
+
+def collect_partner_steps(env: ControlledEnv, episodes_per_team: int, seed: int) -> PartnerSteps:
+    """Whole episodes of every team with a uniformly random controlled agent."""
+    if episodes_per_team < 1:
+        raise ValueError(f"episodes_per_team must be >= 1, got {episodes_per_team}")
+    m, length = env.num_partners, env.spec.episode_len
+    team = np.repeat(np.arange(m, dtype=np.int32), episodes_per_team)
+    n_act = env.spec.num_actions
+
+    def episode(key: jax.Array, partner: jax.Array) -> tuple[jax.Array, ...]:
+        k0, k1 = jax.random.split(key)
+        state, _ = env.reset(k0, partner)
+
+        def body(carry: tuple, k: jax.Array) -> tuple:
+            state, alive = carry
+            ka, ks = jax.random.split(k)
+            a = jax.random.randint(ka, (), 0, n_act, dtype=jnp.int32)
+            state, ts = env.step(ks, state, a)
+            rec = ts.record
+            return (state, alive & ~ts.done), (rec.other_obs, rec.other_actions, alive)
+
+        keys = jax.random.split(k1, length)
+        return jax.lax.scan(body, (state, jnp.ones((), bool)), keys)[1]
+
+    keys = jax.random.split(jax.random.PRNGKey(seed), team.shape[0])
+    obs, actions, live = jax.jit(jax.vmap(episode))(keys, jnp.asarray(team))
+    return PartnerSteps(
+        obs=np.asarray(obs, np.float32),
+        actions=np.asarray(actions, np.int64),
+        team=team,
+        live=np.asarray(live, bool),
+        episode=np.tile(np.arange(episodes_per_team), m),
+    )
+
+
+def max_probability(
+    member: Member, obs: np.ndarray, num_actions: int, samples: int = 64, seed: int = 0
+) -> np.ndarray:
+    """max_a pi(a | o) [B] of ``member`` at each observation ``obs`` [B, D]: exact from its
+    declared probabilities, else estimated by sampling (split halves, see the module doc)."""
+    x = jnp.asarray(obs)
+    if member.probs is not None:
+        probs_fn = member.probs
+        return np.asarray(jax.jit(jax.vmap(lambda o: jnp.max(probs_fn(o))))(x))
+    if samples < 2:
+        raise ValueError(f"samples must be >= 2 (two halves), got {samples}")
+    act = member.act
+
+    def one(key: jax.Array, o: jax.Array) -> jax.Array:
+        draws = jax.vmap(lambda k: act(k, o))(jax.random.split(key, samples))
+        half = samples // 2
+        best = jnp.argmax(jnp.bincount(draws[:half], length=num_actions))
+        return jnp.mean(draws[half:] == best)
+
+    keys = jax.random.split(jax.random.PRNGKey(seed), x.shape[0])
+    return np.asarray(jax.jit(jax.vmap(one))(keys, x))
+
+
+def action_ceiling(
+    population: Population,
+    steps: PartnerSteps,
+    num_actions: int,
+    samples: int = 64,
+    seed: int = 0,
+) -> dict[str, Any]:
+    """{"ceiling": E[max_a pi(a|o)] over the live (episode, step, slot) triples, "members":
+    {name: its mean over the steps it plays}, "sampled": [members estimated by sampling]}.
+
+    Every team has the same number of episodes, so the pooled mean weighs teams equally."""
+    num_slots = steps.obs.shape[2]
+    if num_slots != population.num_others:
+        raise ValueError(
+            f"steps have {num_slots} partner slots; population {population.name!r} has "
+            f"{population.num_others}"
+        )
+    member_of = population.table[steps.team]  # [E, N]
+    values = np.zeros(steps.actions.shape, np.float64)  # [E, T, N]
+    members: dict[str, float] = {}
+    sampled: list[str] = []
+    for idx in np.unique(member_of):
+        member = population.members[int(idx)]
+        plays = np.broadcast_to((member_of == idx)[:, None, :], values.shape)
+        where = plays & steps.live[..., None]
+        got = max_probability(member, steps.obs[where], num_actions, samples, seed + int(idx))
+        values[where] = got
+        members[member.name] = float(got.mean())
+        if member.probs is None:
+            sampled.append(member.name)
+    mask = np.broadcast_to(steps.live[..., None], values.shape)
+    return {"ceiling": float(values[mask].mean()), "members": members, "sampled": sampled}
+
+
+def memoryless_accuracy(
+    steps: PartnerSteps, num_actions: int, cfg: LevelsConfig | None = None
+) -> dict[str, float]:
+    """{"accuracy": held-out accuracy of an MLP on (partner obs, slot one-hot) -> partner
+    action pooled over all teams, "majority": each slot's most frequent training action scored
+    on the test samples}; every 4th episode of each team is test."""
+    cfg = cfg or LevelsConfig()
+    e, t, n, _ = steps.obs.shape
+    slot = np.broadcast_to(np.eye(n, dtype=np.float32), (e, t, n, n))
+    x = np.concatenate([steps.obs, slot], -1)
+    test = np.broadcast_to((steps.episode % 4 == 0)[:, None, None], (e, t, n))
+    live = np.broadcast_to(steps.live[..., None], (e, t, n))
+    slots = np.broadcast_to(np.arange(n), (e, t, n))
+    x, y, test, slots = x[live], steps.actions[live], test[live], slots[live]
+    if test.all() or not test.any():
+        raise ValueError("memoryless_accuracy needs at least 2 episodes per team (train and test)")
+    hits = 0
+    for j in range(n):
+        train_j = y[(slots == j) & ~test]
+        top = np.bincount(train_j, minlength=num_actions).argmax()
+        hits += int(np.sum(y[(slots == j) & test] == top))
+    mlp = ClassifierConfig(hidden=cfg.hidden, train_steps=cfg.train_steps, lr=cfg.lr, seed=cfg.seed)
+    return {
+        "accuracy": fit_accuracy(x, y, num_actions, mlp, test),
+        "majority": hits / int(test.sum()),
+    }
+
+
+def action_levels(env: ControlledEnv, cfg: LevelsConfig | None = None) -> dict[str, Any]:
+    """The ceiling and the memoryless level of ``env``'s population (module docstring):
+    {"ceiling", "members", "sampled", "memoryless", "majority", "steps"}."""
+    cfg = cfg or LevelsConfig()
+    steps = collect_partner_steps(env, cfg.episodes_per_team, cfg.seed)
+    num_actions = env.spec.other_num_actions
+    ceiling = action_ceiling(env.population, steps, num_actions, cfg.samples, cfg.seed)
+    memoryless = memoryless_accuracy(steps, num_actions, cfg)
+    return {
+        **ceiling,
+        "memoryless": memoryless["accuracy"],
+        "majority": memoryless["majority"],
+        "steps": int(steps.live.sum()) * steps.obs.shape[2],
+    }

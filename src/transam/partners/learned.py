@@ -27,10 +27,18 @@ from flax.traverse_util import flatten_dict, unflatten_dict
 from safetensors.numpy import load_file, save_file
 
 from transam.envs.joint import JointView, play
-from transam.envs.population import Member, PolicyFn, Population, Team
+from transam.envs.population import Member, PolicyFn, Population, ProbsFn, Team
 from transam.partners import liam
 from transam.partners.recipes import Recipe
-from transam.partners.train import ACT_MODES, LogitsFn, make_logits, make_policy, select, train_many
+from transam.partners.train import (
+    ACT_MODES,
+    LogitsFn,
+    make_logits,
+    make_policy,
+    select,
+    select_probs,
+    train_many,
+)
 
 SPLITS = ("default", "heldout")
 EVAL_EPISODES = 32
@@ -311,18 +319,34 @@ ARCHITECTURES: dict[str, MemberBuilder] = {
 """Network architectures a manifest member may name (``"arch"``, default ``"mlp"``)."""
 
 
-def member_policy(params: dict[str, Any], entry: dict[str, Any], env: str) -> PolicyFn:
-    """The act function of one manifest member: its architecture's logits, then its action
-    selection (``"act"``: ``"sample"`` (default) or ``"argmax"``)."""
+def _member_logits(params: dict[str, Any], entry: dict[str, Any], env: str) -> LogitsFn:
+    """A manifest member's logits function (its ``"arch"``, checked)."""
     arch = entry.get("arch", "mlp")
     if arch not in ARCHITECTURES:
         valid = ", ".join(ARCHITECTURES)
         raise ValueError(f"member {entry['name']!r}: unknown arch {arch!r}; valid choices: {valid}")
-    act = entry.get("act", "sample")
+    return ARCHITECTURES[arch](params, entry, env)
+
+
+def _member_act(entry: dict[str, Any]) -> str:
+    """A manifest member's action selection (``"act"``, checked)."""
+    act = str(entry.get("act", "sample"))
     if act not in ACT_MODES:
         valid = ", ".join(ACT_MODES)
         raise ValueError(f"member {entry['name']!r}: unknown act {act!r}; valid choices: {valid}")
-    return select(ARCHITECTURES[arch](params, entry, env), act)
+    return act
+
+
+def member_policy(params: dict[str, Any], entry: dict[str, Any], env: str) -> PolicyFn:
+    """The act function of one manifest member: its architecture's logits, then its action
+    selection (``"act"``: ``"sample"`` (default) or ``"argmax"``)."""
+    return select(_member_logits(params, entry, env), _member_act(entry))
+
+
+def member_probs(params: dict[str, Any], entry: dict[str, Any], env: str) -> ProbsFn:
+    """The action distribution :func:`member_policy` draws from (softmax, or a one-hot of the
+    argmax): what an accuracy ceiling needs."""
+    return select_probs(_member_logits(params, entry, env), _member_act(entry))
 
 
 def learned_members(
@@ -337,6 +361,7 @@ def learned_members(
             m["name"],
             member_policy(params[m["name"]], m, env),
             kind=f"{m['kind']}:{m['recipe']}",
+            probs=member_probs(params[m["name"]], m, env),
         )
         for m in entry["members"]
     }

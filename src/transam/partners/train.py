@@ -27,7 +27,7 @@ import numpy as np
 import optax
 
 from transam.envs.joint import JointView
-from transam.envs.population import PolicyFn
+from transam.envs.population import PolicyFn, ProbsFn
 
 Algorithm = Literal["ippo", "mappo"]
 Params = Any
@@ -133,6 +133,21 @@ def select(logits_fn: LogitsFn, act: str = "sample") -> PolicyFn:
     if act == "argmax":
         return lambda key, obs: jnp.argmax(logits_fn(obs)).astype(jnp.int32)
     return lambda key, obs: jax.random.categorical(key, logits_fn(obs)).astype(jnp.int32)
+
+
+def select_probs(logits_fn: LogitsFn, act: str = "sample") -> ProbsFn:
+    """The action distribution :func:`select` draws from: the softmax for ``"sample"``, a
+    one-hot of the argmax for ``"argmax"``."""
+    if act not in ACT_MODES:
+        raise ValueError(f"unknown action selection {act!r}; valid choices: {', '.join(ACT_MODES)}")
+    if act == "argmax":
+
+        def greedy(obs: jax.Array) -> jax.Array:
+            logits = logits_fn(obs)
+            return jax.nn.one_hot(jnp.argmax(logits), logits.shape[-1])
+
+        return greedy
+    return lambda obs: jax.nn.softmax(logits_fn(obs))
 
 
 def make_policy(

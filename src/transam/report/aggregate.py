@@ -11,17 +11,21 @@ import numpy as np
 from transam.report.load import ENV_ORDER, METHOD_ORDER, Grid, RunData, order_key
 from transam.report.stats import curve_ci, interval, stratified_bootstrap
 
+ACC_NEWEST, ACC_ALL = "action_accuracy_newest", "action_accuracy_all_positions"
+EVAL_METRICS = ("return", ACC_NEWEST, ACC_ALL, "obs_mse", "obs_mse_all_positions")
+"""Final metrics read from the final evaluation (a metric a method lacks is absent)."""
 FINAL_METRICS = (
-    "return",
-    "action_accuracy",
-    "obs_mse",
+    *EVAL_METRICS,
     "heldout_return",
     "probe_accuracy",
-    "trend:action_accuracy",
+    f"trend:{ACC_NEWEST}",
     "trend:obs_mse",
 )
-CURVE_METRICS = ("return", "action_accuracy", "obs_mse")
-PER_STEP_METRICS = ("cum_return", "action_accuracy", "obs_mse")
+CURVE_METRICS = ("return", ACC_NEWEST, "obs_mse")
+"""Curves of the evaluations during training (``eval/`` in metrics.jsonl)."""
+TRAIN_CURVE_METRICS = (ACC_NEWEST, ACC_ALL)
+"""Curves of the training batches' metrics (``train/``; the authors chart all-positions)."""
+PER_STEP_METRICS = ("cum_return", ACC_NEWEST, ACC_ALL, "obs_mse")
 SOURCE_EVAL = "final evaluation"
 SOURCE_TRAIN = "last training evaluation"
 
@@ -65,7 +69,7 @@ def run_finals(run: RunData) -> dict[str, tuple[float, str]]:
     if run.status != "finished":
         return out
     ev, last = run.evals.get("train"), run.final or {}
-    for metric in ("return", "action_accuracy", "obs_mse"):
+    for metric in EVAL_METRICS:
         value = _number(ev.get(metric)) if ev else None
         if value is not None:
             out[metric] = (value, SOURCE_EVAL)
@@ -78,7 +82,7 @@ def run_finals(run: RunData) -> dict[str, tuple[float, str]]:
     if isinstance(probe, dict) and (v := _number(probe.get("accuracy"))) is not None:
         out["probe_accuracy"] = (v, SOURCE_EVAL)
     per_step = (ev or {}).get("per_step") or {}
-    for metric in ("action_accuracy", "obs_mse"):
+    for metric in (ACC_NEWEST, "obs_mse"):
         curve = _series(per_step.get(metric))
         if curve is not None and (trend := _trend(curve)) is not None:
             out[f"trend:{metric}"] = (trend, SOURCE_EVAL)
@@ -101,13 +105,14 @@ def stat(values: list[float], seeds: list[int]) -> dict[str, Any]:
 
 
 def _training_curve(runs: list[RunData], key: str) -> dict[str, Any] | None:
-    """Mean + CI of ``eval/<key>`` over seeds at each logged step (unfinished runs included)."""
+    """Mean + CI of ``key`` (``eval/...`` or ``train/...``) over seeds at each logged step
+    (unfinished runs included)."""
     series = []
     for run in runs:
         pts = {
             int(r["step"]): v
             for r in run.metrics
-            if isinstance(r.get("step"), int) and (v := _number(r.get(f"eval/{key}"))) is not None
+            if isinstance(r.get("step"), int) and (v := _number(r.get(key))) is not None
         }
         if pts:
             series.append(pts)
@@ -166,7 +171,12 @@ def cell(runs: list[RunData]) -> dict[str, Any]:
     ]
     out["probe_note"] = notes[0] if notes else None
     out["curves"] = {
-        k: curve for k in CURVE_METRICS if (curve := _training_curve(runs, k)) is not None
+        k: curve for k in CURVE_METRICS if (curve := _training_curve(runs, f"eval/{k}")) is not None
+    }
+    out["train_curves"] = {
+        k: curve
+        for k in TRAIN_CURVE_METRICS
+        if (curve := _training_curve(runs, f"train/{k}")) is not None
     }
     evals = [r.evals["train"] for r in finished if "train" in r.evals]
     series: dict[str, list[np.ndarray]] = {}
@@ -198,7 +208,7 @@ def aggregates(table: dict[str, dict[str, dict[str, Any]]]) -> dict[str, dict[st
     resampled within each env)."""
     out: dict[str, dict[str, Any]] = {}
     methods = sorted({m for env in table.values() for m in env}, key=order_key(METHOD_ORDER))
-    for metric in ("action_accuracy", "probe_accuracy"):
+    for metric in (ACC_NEWEST, "probe_accuracy"):
         for method in methods:
             strata = {
                 env: env_cells[method]["metrics"][metric]["values"]

@@ -119,7 +119,7 @@ def training_curves(
 
 EPISODE_ROWS = (
     ("cum_return", "cumulative reward ↑"),
-    ("action_accuracy", "action accuracy ↑"),
+    ("action_accuracy_newest", "action accuracy (newest position) ↑"),
     ("obs_mse", "observation MSE ↓"),
 )
 

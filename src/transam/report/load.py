@@ -4,6 +4,10 @@ Every file is optional: a run may be missing, unfinished (no final.json), or fin
 yet evaluated (no eval_*.json); a file being written by another process may be torn. Each run
 is read into a :class:`RunData` with a status and the problems met, and nothing here raises
 for a partial grid.
+
+Metric names of older runs are read as today's (:data:`~transam.models.base.LEGACY_METRICS`:
+``action_accuracy``, in metrics.jsonl, final.json and eval_*.json, is the newest-position
+accuracy ``action_accuracy_newest``), so old run directories load unchanged.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import numpy as np
 
 from transam.envs import ENV_NAMES
 from transam.models import METHOD_NAMES
+from transam.models.base import LEGACY_METRICS
 from transam.train.config import ConfigError
 from transam.train.loop import read_metrics
 
@@ -140,6 +145,27 @@ def read_pca(path: Path) -> Projection | None:
     )
 
 
+def renamed(record: dict[str, Any]) -> dict[str, Any]:
+    """``record`` with legacy metric names replaced, bare or after a ``train/``/``eval/``
+    prefix (a name already present in today's form wins)."""
+    out: dict[str, Any] = {}
+    for key, value in record.items():
+        prefix, sep, name = key.rpartition("/")
+        if name not in LEGACY_METRICS:
+            out[key] = value
+        elif (new := prefix + sep + LEGACY_METRICS[name]) not in record:
+            out[new] = value
+    return out
+
+
+def renamed_eval(ev: dict[str, Any]) -> dict[str, Any]:
+    """An eval_*.json with legacy metric names replaced (top level and per_step curves)."""
+    ev = renamed(ev)
+    if isinstance(ev.get("per_step"), dict):
+        ev["per_step"] = renamed(ev["per_step"])
+    return ev
+
+
 def read_run(out: Path, rel: str) -> RunData | None:
     parsed = parse_rel(rel)
     if parsed is None:
@@ -150,15 +176,17 @@ def read_run(out: Path, rel: str) -> RunData | None:
     if not (d / "config.json").exists():
         return run
     run.status = "unfinished"
-    run.metrics = read_metrics(d / "metrics.jsonl")
+    run.metrics = [renamed(r) for r in read_metrics(d / "metrics.jsonl")]
     final = _read_json(d / "final.json", run.problems)
     if isinstance(final, dict) and final.get("seeds"):
         run.status = "finished"
-        run.final = final["seeds"][0] or (run.metrics[-1] if run.metrics else None)
+        first = final["seeds"][0]
+        run.final = renamed(first) if isinstance(first, dict) and first else None
+        run.final = run.final or (run.metrics[-1] if run.metrics else None)
     for partners in PARTNERS:
         ev = _read_json(d / f"eval_{partners}.json", run.problems)
         if isinstance(ev, dict) and isinstance(ev.get("return"), dict):
-            run.evals[partners] = ev
+            run.evals[partners] = renamed_eval(ev)
         elif ev is not None:
             run.problems.append(f"eval_{partners}.json: no 'return' entry")
         npz = d / f"eval_{partners}_pca.npz"

@@ -10,8 +10,14 @@ For a model with a decoder, every step also scores ``decode(z_t, o^{-1}_t)`` aga
 training-only :class:`PartnerRecord`: other-agent action accuracy (argmax of the logits,
 averaged over agents and steps) where it predicts actions, and the MSE of the predicted joint
 other-agent observation (averaged over its entries and the steps) where it reconstructs them;
-a metric the model does not predict is absent. Per-step curves over the in-episode time are
-returned too (``per_step/...``) for later reports.
+a metric the model does not predict is absent. The accuracy is ``action_accuracy_newest``: the
+decoder on the z the policy acted on, i.e. the newest window position (the authors' evaluation
+metric); ``obs_mse`` likewise. With ``positions=True`` (the final evaluation only: it encodes
+each window a second time) a model that decodes every window position (TransAM, -fuse, -im)
+also gets ``action_accuracy_all_positions`` / ``obs_mse_all_positions``: per step, the mean
+over the valid positions of the window ending there (each against its own step's partners),
+then averaged over steps like the others (each window weighs the same). Per-step curves over
+the in-episode time are returned too (``per_step/...``) for later reports.
 
 :func:`make_episodes` is the one rollout both use: it returns the per-step arrays (reward, live
 mask, scores, embeddings z, partner ids), and :func:`make_evaluate` reduces them to the
@@ -28,7 +34,8 @@ import jax.numpy as jnp
 from flax import struct
 
 from transam.envs.core import ControlledEnv
-from transam.models.base import AgentModel
+from transam.models.base import ACC_ALL, ACC_NEWEST, MSE_ALL, AgentModel
+from transam.models.transam import TransAM
 from transam.train.a2c import act, batch_carry, env_step, first_step, make_policy
 from transam.train.config import TrainConfig
 
@@ -43,18 +50,24 @@ class Episodes:
     live: jax.Array  # [T, N] float: 1 while the episode runs (step t belongs to it)
     z: jax.Array  # [T, N, embed_dim] the embedding the policy acted on at t
     partner: jax.Array  # [N] int32 partner index of each episode
-    scores: dict[str, jax.Array]  # [T, N] action_accuracy / obs_mse where predicted, 0 when dead
+    scores: dict[str, jax.Array]  # [T, N] per-step metrics where predicted, 0 when dead
 
 
 EpisodesFn = Callable[[Any, Any, jax.Array, jax.Array | None], Episodes]
 
 
-def make_episodes(config: TrainConfig, env: ControlledEnv, model: AgentModel, n: int) -> EpisodesFn:
+def make_episodes(
+    config: TrainConfig, env: ControlledEnv, model: AgentModel, n: int, positions: bool = False
+) -> EpisodesFn:
     """``(policy_params, model_params, key, partner) -> Episodes`` of ``n`` episodes (pure; not
-    jitted). ``partner`` ([n] int32) fixes each episode's partner; None draws them uniformly."""
+    jitted). ``partner`` ([n] int32) fixes each episode's partner; None draws them uniformly.
+    ``positions`` adds the all-positions metrics where the model has them (module docstring)."""
     length = env.spec.episode_len
     policy = make_policy(config, env)
     greedy = config.eval.greedy
+    window = model if positions and isinstance(model, TransAM) and model.decodes_positions else None
+    k = window.config.context if window is not None else 1
+    spec = env.spec
 
     def episodes(
         policy_params: Any, model_params: Any, key: jax.Array, partner: jax.Array | None = None
@@ -71,10 +84,13 @@ def make_episodes(config: TrainConfig, env: ControlledEnv, model: AgentModel, n:
             policy.init_carry((n,)),
             batch_carry(model.init_carry(env.spec), n),
             jnp.ones((n,), bool),
+            # The partners' data of the last K steps (newest last), lined up with the window.
+            jnp.zeros((n, k, spec.num_others, spec.other_obs_dim), jnp.float32),
+            jnp.zeros((n, k, spec.num_others), jnp.int32),
         )
 
         def body(carry: tuple[Any, ...], key: jax.Array) -> tuple[tuple[Any, ...], Any]:
-            env_state, x, pc, mc, alive = carry
+            env_state, x, pc, mc, alive, past_obs, past_act = carry
             k_act, k_env = jax.random.split(key)
             pc, mc, z, logits, _ = act(
                 policy, model, policy_params, model_params, pc, mc, x, env_state
@@ -92,12 +108,27 @@ def make_episodes(config: TrainConfig, env: ControlledEnv, model: AgentModel, n:
             scores = {}
             if act_logits is not None:
                 correct = jnp.argmax(act_logits, -1) == rec.other_actions
-                scores["action_accuracy"] = correct.mean(-1) * live
+                scores[ACC_NEWEST] = correct.mean(-1) * live
             if obs_pred is not None:
                 err = (obs_pred - rec.other_obs.reshape(n, -1)) ** 2
                 scores["obs_mse"] = err.mean(-1) * live
+            shift = lambda buf, new: jnp.concatenate([buf[:, 1:], new[:, None]], axis=1)
+            past_obs = shift(past_obs, rec.other_obs.astype(jnp.float32))
+            past_act = shift(past_act, rec.other_actions.astype(jnp.int32))
+            if window is not None:
+                (w_obs, w_logits), valid = jax.vmap(window.decode_window, in_axes=(None, 0, 0))(
+                    model_params, mc, past_obs
+                )  # [n, K, ...]
+                assert w_logits is not None
+                w = valid.astype(jnp.float32)
+                count = jnp.maximum(w.sum(-1), 1.0)
+                hit = (jnp.argmax(w_logits, -1) == past_act).mean(-1)  # [n, K]
+                scores[ACC_ALL] = (hit * w).sum(-1) / count * live
+                if w_obs is not None:
+                    sq = ((w_obs - past_obs.reshape(n, k, -1)) ** 2).mean(-1)
+                    scores[MSE_ALL] = (sq * w).sum(-1) / count * live
             out = (ts.reward * live, live, z, scores)
-            return (env_state, x, pc, mc, alive & ~ts.done), out
+            return (env_state, x, pc, mc, alive & ~ts.done, past_obs, past_act), out
 
         _, (reward, live, z, scores) = jax.lax.scan(body, init, jax.random.split(k_run, length))
         return Episodes(reward=reward, live=live, z=z, partner=state0.partner, scores=scores)
@@ -108,7 +139,8 @@ def make_episodes(config: TrainConfig, env: ControlledEnv, model: AgentModel, n:
 def make_evaluate(config: TrainConfig, env: ControlledEnv, model: AgentModel) -> EvalFn:
     """A jitted ``(policy_params, model_params, key) -> metrics`` over ``config.eval.episodes``
     episodes (partners drawn uniformly). Metrics: ``return`` (mean), ``return_std`` and, with
-    a decoder, ``action_accuracy`` and ``obs_mse`` where the model predicts them."""
+    a decoder, ``action_accuracy_newest`` and ``obs_mse`` where the model predicts them (no
+    all-positions metrics here: training logs them from the model's loss)."""
     episodes = make_episodes(config, env, model, config.eval.episodes)
 
     def evaluate(policy_params: Any, model_params: Any, key: jax.Array) -> dict[str, jax.Array]:

@@ -54,7 +54,7 @@ import numpy as np
 from transam.compose import make_env
 from transam.envs.core import ControlledEnv
 from transam.models import make_model
-from transam.models.base import AgentModel
+from transam.models.base import ACC_NEWEST, AgentModel
 from transam.train.a2c import (
     HEALTH_KEYS,
     NONFINITE_QUANTITIES,
@@ -334,7 +334,7 @@ def make_record(
     for k, v in sorted(train.items()):
         if k not in ("episodes", "return_sum"):
             rec[f"train/{k.removeprefix('model/')}"] = _clean_float(v)
-    for k in ("return", "return_std", "action_accuracy", "obs_mse"):
+    for k in ("return", "return_std", ACC_NEWEST, "obs_mse"):
         if k in evaluation:  # a method without a decoder has no accuracy / MSE: absent, not 0
             rec[f"eval/{k}"] = _clean_float(evaluation[k])
     return rec
@@ -581,7 +581,7 @@ def _run_group(
                     steps * len(seeds),
                     sps=f"{steps * len(seeds) / seconds:,.0f}",
                     ret=_fmt([r["train/return"] for r in last]),
-                    acc=_fmt([r.get("train/action_accuracy") for r in last]),
+                    acc=_fmt([r.get(f"train/{ACC_NEWEST}") for r in last]),
                 )
     finally:
         for f in logs:

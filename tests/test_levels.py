@@ -1,0 +1,118 @@
+"""Accuracy levels of a partner population (``transam partners diversity``): the ceiling
+E[max_a pi(a|o)] and the memoryless team-agnostic level, on constructed populations."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from transam.compose import make_env
+from transam.envs.population import Member, Population, Team
+from transam.partners.diversity import (
+    LevelsConfig,
+    action_ceiling,
+    collect_partner_steps,
+    memoryless_accuracy,
+)
+from transam.partners.train import select, select_probs
+
+FIXED = jnp.array([0.7, 0.1, 0.1, 0.05, 0.05])
+
+
+def fixed_act(key: jax.Array, obs: jax.Array) -> jax.Array:
+    """Ignores its observation; draws from FIXED."""
+    return jax.random.categorical(key, jnp.log(FIXED)).astype(jnp.int32)
+
+
+def uniform_act(key: jax.Array, obs: jax.Array) -> jax.Array:
+    return jax.random.randint(key, (), 0, 5, dtype=jnp.int32)
+
+
+def sign_rule(key: jax.Array, obs: jax.Array) -> jax.Array:
+    """Deterministic in the observation: +x when its own x position is negative, else -x."""
+    return jnp.where(obs[2] < 0, 1, 2).astype(jnp.int32)
+
+
+MEMBERS = [
+    Member("rule", sign_rule),  # no declared probabilities: sampled
+    Member("fixed", fixed_act, probs=lambda obs: FIXED),  # declared: exact
+    Member("fixed_sampled", fixed_act),
+    Member("uniform", uniform_act),
+]
+
+
+def spread_with(teams: list[tuple[str, str]]) -> object:
+    pop = Population("test", MEMBERS, [Team(f"{a}+{b}", (a, b)) for a, b in teams])
+    return make_env("spread", population=pop)
+
+
+def test_ceiling_of_known_members() -> None:
+    env = spread_with([("rule", "rule"), ("fixed", "fixed_sampled"), ("uniform", "uniform")])
+    steps = collect_partner_steps(env, episodes_per_team=4, seed=0)  # type: ignore[arg-type]
+    assert steps.obs.shape == (12, 25, 2, 18) and steps.live.all()
+    got = action_ceiling(env.population, steps, num_actions=5, samples=64)  # type: ignore[attr-defined]
+    members = got["members"]
+    assert members["rule"] == 1.0  # deterministic: both halves agree at every observation
+    assert members["fixed"] == pytest.approx(0.7, abs=1e-6)  # from its probabilities
+    assert members["fixed_sampled"] == pytest.approx(0.7, abs=0.03)  # by sampling
+    assert members["uniform"] == pytest.approx(0.2, abs=0.03)  # no inflation from the max
+    assert sorted(got["sampled"]) == ["fixed_sampled", "rule", "uniform"]
+    # pooled over teams, slots and steps, teams weighing the same
+    want = (2 * 1.0 + 0.7 + members["fixed_sampled"] + 2 * members["uniform"]) / 6
+    assert got["ceiling"] == pytest.approx(want, abs=1e-6)
+
+
+def test_learned_member_probabilities_match_its_action_selection() -> None:
+    logits = lambda obs: jnp.array([0.0, 2.0, 0.0, 1.0, 0.0])
+    np.testing.assert_allclose(select_probs(logits, "argmax")(None), [0, 1, 0, 0, 0])
+    np.testing.assert_allclose(select_probs(logits, "sample")(None), jax.nn.softmax(logits(None)))
+    act = select(logits, "argmax")
+    assert int(act(jax.random.key(0), None)) == 1
+    with pytest.raises(ValueError, match="valid choices: sample, argmax"):
+        select_probs(logits, "greedy")
+
+
+def test_memoryless_level_of_constructed_populations() -> None:
+    cfg = LevelsConfig(train_steps=600)
+    # Two teams whose members play the same rule of their own observation: ~1.0.
+    env = spread_with([("rule", "rule"), ("rule", "rule")])
+    steps = collect_partner_steps(env, episodes_per_team=16, seed=1)  # type: ignore[arg-type]
+    got = memoryless_accuracy(steps, 5, cfg)
+    assert got["accuracy"] > 0.95
+    assert got["majority"] < 0.85  # the rule is not one constant action
+    # A member that ignores its observation and acts uniformly: about 1/5.
+    env = spread_with([("uniform", "uniform"), ("uniform", "uniform")])
+    steps = collect_partner_steps(env, episodes_per_team=16, seed=2)  # type: ignore[arg-type]
+    got = memoryless_accuracy(steps, 5, cfg)
+    assert 0.12 < got["accuracy"] < 0.3 and 0.12 < got["majority"] < 0.3
+    with pytest.raises(ValueError, match="episodes_per_team"):
+        collect_partner_steps(env, episodes_per_team=0, seed=0)  # type: ignore[arg-type]
+
+
+def test_report_puts_accuracy_beside_recorded_levels(monkeypatch: pytest.MonkeyPatch) -> None:
+    from transam.partners import learned
+    from transam.report import build
+
+    recorded = {"action_ceiling": 0.84, "memoryless_accuracy": 0.53, "majority_rate": 0.26}
+    manifests = {"spread": {"default": {"diversity": {**recorded, "population_digest": "abc"}}}}
+
+    def load(env: str, root: object = None) -> dict:
+        if env not in manifests:
+            raise FileNotFoundError(env)
+        return manifests[env]
+
+    monkeypatch.setattr(learned, "load_manifest", load)
+    levels = build.partner_levels(["spread", "tag"])
+    assert levels["spread"] is not None and levels["spread"]["action_ceiling"] == 0.84
+    assert levels["tag"] is None
+    stat = {"mean": 0.41}
+    table = {
+        e: {"transam": {"metrics": {"action_accuracy_newest": stat}, "seeds": [0]}}
+        for e in ("spread", "tag")
+    }
+    md = "\n".join(build._levels_md(table, levels))
+    assert "| *ceiling E[max π(a|o)]* | 84.0 | not recorded |" in md
+    assert "| *memoryless, team-agnostic* | 53.0 | not recorded |" in md
+    assert "| **TransAM** (newest) | 41.0 | 41.0 |" in md and "spread abc" in md
