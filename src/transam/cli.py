@@ -40,7 +40,8 @@ class EnvsList:
     """Print each environment's metadata (sizes, episode length, partner population)."""
 
     partners: PartnerChoice = "default"
-    """partner population: the shipped learned one, its held-out split, or the scripted one"""
+    """partner population: the shipped learned one, its held-out split, the scripted one, or a
+    population directory (manifest.json + default.safetensors)"""
 
     def run(self) -> None:
         from transam.compose import make_env
@@ -89,7 +90,8 @@ class EnvsBench:
     repeats: int = 5
     """timed rollouts per environment"""
     partners: PartnerChoice = "default"
-    """partner population: the shipped learned one, its held-out split, or the scripted one"""
+    """partner population: the shipped learned one, its held-out split, the scripted one, or a
+    population directory (manifest.json + default.safetensors)"""
 
     def run(self) -> None:
         from transam.compose import make_env
@@ -111,10 +113,13 @@ class EnvsBench:
         console.print(table)
 
 
+ROLLOUT_AGENTS = ("random", "landmark")
+
+
 @dataclass
 class EnvsRollout:
-    """Roll out every environment with its partner population and a random controlled agent,
-    and print each partner team's episode returns."""
+    """Roll out every environment with its partner population and a random controlled agent
+    (or, on Spread, the landmark rule), and print each partner team's episode returns."""
 
     envs: tuple[EnvName, ...] = ALL_ENVS
     """environments to roll out"""
@@ -125,7 +130,11 @@ class EnvsRollout:
     seed: int = 0
     """PRNG seed"""
     partners: PartnerChoice = "default"
-    """partner population: the shipped learned one, its held-out split, or the scripted one"""
+    """partner population: the shipped learned one, its held-out split, the scripted one, or a
+    population directory (manifest.json + default.safetensors)"""
+    agent: Literal["random", "landmark"] = "random"
+    """controlled agent: uniformly random, or (Spread only) transam.partners.spread's
+    landmark_agent: head for the landmark whose nearest partner is farthest away"""
 
     def run(self) -> None:
         import jax
@@ -135,14 +144,32 @@ class EnvsRollout:
         from transam.envs.rollout import episode_stats, make_random_rollout
 
         _check_positive(episodes=self.episodes, num_envs=self.num_envs)
-        summary = Table(title="random controlled agent: return (worst/best = team means)")
-        for col in ("env", "teams", "eps", "return", "std", "worst", "best", "secs"):
+        policy = None
+        if self.agent == "landmark":
+            if set(self.envs) != {"spread"}:
+                raise SystemExit(
+                    "error: --agent landmark is a Spread rule; pass --envs spread "
+                    f"(got --envs {' '.join(self.envs)})"
+                )
+            from transam.partners.spread import landmark_agent
+
+            policy = landmark_agent
+        elif self.agent != "random":
+            raise SystemExit(
+                f"error: unknown --agent {self.agent!r}; valid choices: {', '.join(ROLLOUT_AGENTS)}"
+            )
+        summary = Table(
+            title=f"{self.agent} controlled agent: return (worst/best = team means), "
+            f"{self.episodes * self.num_envs} episodes per env"
+        )
+        for col in ("env", "teams", "eps", "return", "std", "± s.e.", "worst", "best", "secs"):
             summary.add_column(col, justify="right", no_wrap=True)
         for name in self.envs:
             start = time.perf_counter()
             env = make_env(name, partners=self.partners)
             steps = self.episodes * env.spec.episode_len
-            _, ts = make_random_rollout(env, self.num_envs, steps)(jax.random.key(self.seed))
+            rollout = make_random_rollout(env, self.num_envs, steps, policy)
+            _, ts = rollout(jax.random.key(self.seed))
             stats = episode_stats(ts)
             per_team = stats.by_partner(env.num_partners)
             table = Table(title=f"{name}: {env.population.name} population")
@@ -164,6 +191,7 @@ class EnvsRollout:
                 str(len(stats.returns)),
                 _num(stats.returns.mean()),
                 _num(stats.returns.std()),
+                _num(stats.returns.std() / np.sqrt(max(len(stats.returns), 1))),
                 _num(np.nanmin(means)),
                 _num(np.nanmax(means)),
                 f"{time.perf_counter() - start:.1f}",
