@@ -41,7 +41,7 @@ class EnvsList:
 
     partners: PartnerChoice = "default"
     """partner population: the shipped learned one, its held-out split, the scripted one, or a
-    population directory (manifest.json + default.safetensors)"""
+    population directory (manifest.json + default.safetensors; only the env it was made for)"""
 
     def run(self) -> None:
         from transam.compose import make_env
@@ -50,7 +50,7 @@ class EnvsList:
         for col in ("env", "obs", "acts", "others", "other obs", "other acts", "steps", "teams"):
             table.add_column(col, no_wrap=True, justify="left" if col == "env" else "right")
         notes = []
-        for name in ALL_ENVS:
+        for name in _envs_for(self.partners, ALL_ENVS):
             env = make_env(name, partners=self.partners)
             s = env.spec
             table.add_row(
@@ -91,7 +91,7 @@ class EnvsBench:
     """timed rollouts per environment"""
     partners: PartnerChoice = "default"
     """partner population: the shipped learned one, its held-out split, the scripted one, or a
-    population directory (manifest.json + default.safetensors)"""
+    population directory (manifest.json + default.safetensors; only the env it was made for)"""
 
     def run(self) -> None:
         from transam.compose import make_env
@@ -104,7 +104,7 @@ class EnvsBench:
         )
         for col in ("env", "median steps/s", "min", "max"):
             table.add_column(col, justify="right")
-        for name in self.envs:
+        for name in _envs_for(self.partners, self.envs):
             env = make_env(name, partners=self.partners)
             rates = steps_per_second(env, self.num_envs, self.steps, self.repeats)
             table.add_row(
@@ -131,7 +131,7 @@ class EnvsRollout:
     """PRNG seed"""
     partners: PartnerChoice = "default"
     """partner population: the shipped learned one, its held-out split, the scripted one, or a
-    population directory (manifest.json + default.safetensors)"""
+    population directory (manifest.json + default.safetensors; only the env it was made for)"""
     agent: Literal["random", "landmark"] = "random"
     """controlled agent: uniformly random, or (Spread only) transam.partners.spread's
     landmark_agent: head for the landmark whose nearest partner is farthest away"""
@@ -144,12 +144,13 @@ class EnvsRollout:
         from transam.envs.rollout import episode_stats, make_random_rollout
 
         _check_positive(episodes=self.episodes, num_envs=self.num_envs)
+        envs = _envs_for(self.partners, self.envs)
         policy = None
         if self.agent == "landmark":
-            if set(self.envs) != {"spread"}:
+            if set(envs) != {"spread"}:
                 raise SystemExit(
                     "error: --agent landmark is a Spread rule; pass --envs spread "
-                    f"(got --envs {' '.join(self.envs)})"
+                    f"(got --envs {' '.join(envs)})"
                 )
             from transam.partners.spread import landmark_agent
 
@@ -164,7 +165,7 @@ class EnvsRollout:
         )
         for col in ("env", "teams", "eps", "return", "std", "± s.e.", "worst", "best", "secs"):
             summary.add_column(col, justify="right", no_wrap=True)
-        for name in self.envs:
+        for name in envs:
             start = time.perf_counter()
             env = make_env(name, partners=self.partners)
             steps = self.episodes * env.spec.episode_len
@@ -197,6 +198,23 @@ class EnvsRollout:
                 f"{time.perf_counter() - start:.1f}",
             )
         console.print(summary)
+
+
+def _envs_for(partners: str, envs: tuple[EnvName, ...]) -> tuple[str, ...]:
+    """``envs``, or for a population directory only the env its manifest names (it fits no
+    other); an unknown ``partners`` value stops with the valid choices."""
+    from transam.compose import PARTNER_CHOICES, check_partners
+    from transam.partners.learned import read_population_dir
+
+    if check_partners(partners) in PARTNER_CHOICES:
+        return envs
+    made_for = read_population_dir(partners).get("env")
+    if made_for not in envs:
+        raise SystemExit(
+            f"error: population directory {partners} is for env {made_for!r}; pass --envs "
+            f"{made_for}"
+        )
+    return (made_for,)
 
 
 def _num(x: float) -> str:
