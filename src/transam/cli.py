@@ -41,7 +41,8 @@ class EnvsList:
     """Print each environment's metadata (sizes, episode length, partner population)."""
 
     partners: PartnerChoice = "default"
-    """partner population: the shipped learned one, its held-out split, or the scripted one"""
+    """partner population: the shipped learned one, its held-out split, the scripted one, or a
+    population directory (manifest.json + default.safetensors; only the env it was made for)"""
 
     def run(self) -> None:
         from transam.compose import make_env
@@ -50,7 +51,7 @@ class EnvsList:
         for col in ("env", "obs", "acts", "others", "other obs", "other acts", "steps", "teams"):
             table.add_column(col, no_wrap=True, justify="left" if col == "env" else "right")
         notes = []
-        for name in ALL_ENVS:
+        for name in _envs_for(self.partners, ALL_ENVS):
             env = make_env(name, partners=self.partners)
             s = env.spec
             table.add_row(
@@ -90,7 +91,8 @@ class EnvsBench:
     repeats: int = 5
     """timed rollouts per environment"""
     partners: PartnerChoice = "default"
-    """partner population: the shipped learned one, its held-out split, or the scripted one"""
+    """partner population: the shipped learned one, its held-out split, the scripted one, or a
+    population directory (manifest.json + default.safetensors; only the env it was made for)"""
 
     def run(self) -> None:
         from transam.compose import make_env
@@ -103,7 +105,7 @@ class EnvsBench:
         )
         for col in ("env", "median steps/s", "min", "max"):
             table.add_column(col, justify="right")
-        for name in self.envs:
+        for name in _envs_for(self.partners, self.envs):
             env = make_env(name, partners=self.partners)
             rates = steps_per_second(env, self.num_envs, self.steps, self.repeats)
             table.add_row(
@@ -112,10 +114,13 @@ class EnvsBench:
         console.print(table)
 
 
+ROLLOUT_AGENTS = ("random", "landmark")
+
+
 @dataclass
 class EnvsRollout:
-    """Roll out every environment with its partner population and a random controlled agent,
-    and print each partner team's episode returns."""
+    """Roll out every environment with its partner population and a random controlled agent
+    (or, on Spread, the landmark rule), and print each partner team's episode returns."""
 
     envs: tuple[EnvName, ...] = ALL_ENVS
     """environments to roll out"""
@@ -126,7 +131,11 @@ class EnvsRollout:
     seed: int = 0
     """PRNG seed"""
     partners: PartnerChoice = "default"
-    """partner population: the shipped learned one, its held-out split, or the scripted one"""
+    """partner population: the shipped learned one, its held-out split, the scripted one, or a
+    population directory (manifest.json + default.safetensors; only the env it was made for)"""
+    agent: Literal["random", "landmark"] = "random"
+    """controlled agent: uniformly random, or (Spread only) transam.partners.spread's
+    landmark_agent: head for the landmark whose nearest partner is farthest away"""
 
     def run(self) -> None:
         import jax
@@ -136,14 +145,33 @@ class EnvsRollout:
         from transam.envs.rollout import episode_stats, make_random_rollout
 
         _check_positive(episodes=self.episodes, num_envs=self.num_envs)
-        summary = Table(title="random controlled agent: return (worst/best = team means)")
-        for col in ("env", "teams", "eps", "return", "std", "worst", "best", "secs"):
+        envs = _envs_for(self.partners, self.envs)
+        policy = None
+        if self.agent == "landmark":
+            if set(envs) != {"spread"}:
+                raise SystemExit(
+                    "error: --agent landmark is a Spread rule; pass --envs spread "
+                    f"(got --envs {' '.join(envs)})"
+                )
+            from transam.partners.spread import landmark_agent
+
+            policy = landmark_agent
+        elif self.agent != "random":
+            raise SystemExit(
+                f"error: unknown --agent {self.agent!r}; valid choices: {', '.join(ROLLOUT_AGENTS)}"
+            )
+        summary = Table(
+            title=f"{self.agent} controlled agent: return (worst/best = team means), "
+            f"{self.episodes * self.num_envs} episodes per env"
+        )
+        for col in ("env", "teams", "eps", "return", "std", "± s.e.", "worst", "best", "secs"):
             summary.add_column(col, justify="right", no_wrap=True)
-        for name in self.envs:
+        for name in envs:
             start = time.perf_counter()
             env = make_env(name, partners=self.partners)
             steps = self.episodes * env.spec.episode_len
-            _, ts = make_random_rollout(env, self.num_envs, steps)(jax.random.key(self.seed))
+            rollout = make_random_rollout(env, self.num_envs, steps, policy)
+            _, ts = rollout(jax.random.key(self.seed))
             stats = episode_stats(ts)
             per_team = stats.by_partner(env.num_partners)
             table = Table(title=f"{name}: {env.population.name} population")
@@ -165,11 +193,29 @@ class EnvsRollout:
                 str(len(stats.returns)),
                 _num(stats.returns.mean()),
                 _num(stats.returns.std()),
+                _num(stats.returns.std() / np.sqrt(max(len(stats.returns), 1))),
                 _num(np.nanmin(means)),
                 _num(np.nanmax(means)),
                 f"{time.perf_counter() - start:.1f}",
             )
         console.print(summary)
+
+
+def _envs_for(partners: str, envs: tuple[EnvName, ...]) -> tuple[str, ...]:
+    """``envs``, or for a population directory only the env its manifest names (it fits no
+    other); an unknown ``partners`` value stops with the valid choices."""
+    from transam.compose import PARTNER_CHOICES, check_partners
+    from transam.partners.learned import read_population_dir
+
+    if check_partners(partners) in PARTNER_CHOICES:
+        return envs
+    made_for = read_population_dir(partners).get("env")
+    if made_for not in envs:
+        raise SystemExit(
+            f"error: population directory {partners} is for env {made_for!r}; pass --envs "
+            f"{made_for}"
+        )
+    return (made_for,)
 
 
 def _num(x: float) -> str:

@@ -10,6 +10,10 @@ Partner populations (``make_env(..., partners=...)``):
   Tag differs: its default population is LIAM's pretrained predators (imported, MIT), its
   held-out one our own learned predators in the same 10-team table.
 * ``"heuristic"``: the scripted population of :mod:`transam.partners.<env>`.
+* a **population directory** (a path; the choices above take precedence, so write
+  ``./default`` for a folder of that name): ``manifest.json`` + ``default.safetensors`` in the
+  shipped format (:mod:`transam.partners.learned` describes it), e.g. one written by
+  ``transam partners import-authors spread`` or by you.
 
 The learned partners were trained in the default game, so they are offered only for a config
 that equals the default in every field except those in :data:`PARTNER_BLIND_FIELDS` (fields
@@ -19,19 +23,55 @@ the observation size; Overcooked's ``controlled_slot``, which puts the partner i
 was not trained for; Tag's ``hard_walls``, which changes the dynamics) raises
 :class:`EnvError` rather than silently switching to other partners: pass
 ``partners="heuristic"`` or a population of your own.
+
+A population directory follows the same rule against the config its manifest names
+(``"config"``, e.g. ``{"dynamics": "authors"}``; fields it does not name: their defaults), and
+must be made for this env (the manifest's ``"env"``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import importlib
-from typing import Any, Literal
+import os
+from pathlib import Path
+from typing import Annotated, Any
+
+import tyro
 
 from transam.envs import ControlledEnv, EnvError, check_config, env_module
 from transam.envs.population import Population
 
-PartnerChoice = Literal["default", "heldout", "heuristic"]
 PARTNER_CHOICES: tuple[str, ...] = ("default", "heldout", "heuristic")
+PartnerChoice = Annotated[str, tyro.conf.arg(metavar="{default,heldout,heuristic}|DIR")]
+"""A ``partners`` value: one of :data:`PARTNER_CHOICES` or a population directory's path
+(checked by :func:`check_partners`, not by the type)."""
+DIRECTORY_FORMAT = "a population directory (manifest.json + <split>.safetensors, split 'default')"
+
+
+def check_partners(partners: str | os.PathLike[str]) -> str:
+    """``partners`` as a string when it is a choice of :data:`PARTNER_CHOICES` or a population
+    directory; else :class:`EnvError` naming the value, the valid choices and the format."""
+    from transam.partners.learned import is_population_dir
+
+    value = os.fspath(partners)
+    if value in PARTNER_CHOICES or is_population_dir(value):
+        return value
+    why = ""
+    if Path(value).is_dir():
+        why = f" ({value!r} is a directory without manifest.json)"
+    raise EnvError(
+        f"unknown partners {value!r}{why}; valid choices: {', '.join(PARTNER_CHOICES)}, or "
+        f"{DIRECTORY_FORMAT}"
+    )
+
+
+def resolve_partners(partners: str) -> str:
+    """A population directory as an absolute path (runs record it, and may be evaluated or
+    resumed from another working directory); the named choices unchanged."""
+    value = check_partners(partners)
+    return value if value in PARTNER_CHOICES else str(Path(value).resolve())
+
 
 PARTNER_BLIND_FIELDS: dict[str, frozenset[str]] = {
     "tag": frozenset({"episode_len", "boundary_penalty"}),
@@ -46,52 +86,79 @@ rewards or the episode length (Overcooked's urgency channel means "under 40 step
 length). A field not listed here must keep its default for ``partners="default"/"heldout"``."""
 
 
-def partner_population(name: str, config: Any = None, partners: str = "default") -> Population:
+def partner_population(
+    name: str, config: Any = None, partners: str | os.PathLike[str] = "default"
+) -> Population:
     """The ``partners`` population of env ``name`` for ``config`` (see the module docstring).
 
     Raises :class:`EnvError` for an unknown choice, or for a learned choice with a config the
     learned partners were not trained for (naming the fields and the way out).
     """
     config = check_config(name, config)
-    if partners not in PARTNER_CHOICES:
-        raise EnvError(
-            f"unknown partners {partners!r}; valid choices: {', '.join(PARTNER_CHOICES)}"
-        )
+    partners = check_partners(partners)
     if partners == "heuristic":
         heuristics = importlib.import_module(f"transam.partners.{name}")
         pop: Population = heuristics.heuristic_population(config)
         return pop
-    default = type(config)()
+    from transam.partners import learned
+
+    made_for, what, label = type(config)(), "the default game", "default"
+    manifest = None
+    if partners not in PARTNER_CHOICES:
+        try:
+            manifest = learned.read_population_dir(partners, name)
+        except ValueError as err:
+            raise EnvError(str(err)) from None
+        named = manifest.get("config") or {}
+        fields = {f.name for f in dataclasses.fields(made_for)}
+        unknown = sorted(set(named) - fields)
+        if unknown:
+            raise EnvError(
+                f"population directory {partners!r}: its config names unknown {name} field(s) "
+                f"{', '.join(unknown)}; valid: {', '.join(sorted(fields))}"
+            )
+        made_for = dataclasses.replace(made_for, **named)
+        what = f"the config its manifest names ({_fields(named) or 'the defaults'})"
+        label = "made for"
     changed = [
-        f"{f.name}={getattr(config, f.name)!r} (default {getattr(default, f.name)!r})"
+        f"{f.name}={getattr(config, f.name)!r} ({label} {getattr(made_for, f.name)!r})"
         for f in dataclasses.fields(config)
         if f.name not in PARTNER_BLIND_FIELDS[name]
-        and getattr(config, f.name) != getattr(default, f.name)
+        and getattr(config, f.name) != getattr(made_for, f.name)
     ]
     if changed:
         raise EnvError(
-            f"partners {partners!r} of env {name!r} are learned in the default game and do not "
+            f"partners {partners!r} of env {name!r} are learned in {what} and do not "
             f"fit this config ({', '.join(changed)}); pass partners='heuristic' (valid choices: "
-            f"{', '.join(PARTNER_CHOICES)}) or a population of your own"
+            f"{', '.join(PARTNER_CHOICES)}, or {DIRECTORY_FORMAT}) or a population of your own"
         )
-    from transam.partners.learned import population
+    try:
+        if manifest is not None:
+            return learned.directory_population(name, partners)
+        return learned.population(name, partners)
+    except ValueError as err:
+        raise EnvError(str(err)) from None
 
-    return population(name, partners)
+
+def _fields(values: dict[str, Any]) -> str:
+    return ", ".join(f"{k}={v!r}" for k, v in sorted(values.items()))
 
 
 def make_env(
     name: str,
     config: Any = None,
     population: Population | None = None,
-    partners: str = "default",
+    partners: str | os.PathLike[str] = "default",
 ) -> ControlledEnv:
     """Environment ``name`` with ``config`` (defaults when None) and a partner population.
 
     ``population`` is used as given; otherwise ``partners`` picks one (``"default"``: the
-    shipped learned population; ``"heldout"``; ``"heuristic"``), see the module docstring.
+    shipped learned population; ``"heldout"``; ``"heuristic"``; or a population directory's
+    path), see the module docstring.
     """
     module = env_module(name)
     config = check_config(name, config)
+    partners = os.fspath(partners)
     if population is None:
         population = partner_population(name, config, partners)
     elif partners != "default":

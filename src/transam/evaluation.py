@@ -32,7 +32,8 @@ and needs no iterative fitting. The projection is PCA of the embeddings at each 
 step. NAM has no learned embedding (its z is the one-hot previous action), so it gets neither;
 the Oracle's z contains the other agents' observations (privileged), which the JSON notes.
 
-JSON: ``env``, ``method``, ``seed``, ``partners`` ("train"|"heldout"), ``population`` (the
+JSON: ``env``, ``method``, ``seed``, ``partners`` ("train"|"heldout"|a population directory,
+written to ``eval_pop-NAME.*``), ``population`` (the
 partner choice it mapped to), ``population_name``, ``trained_partners``, ``population_digest``
 and ``trained_population_digest`` (the shipped population's fingerprint now and the run's
 partners.json's; None for scripted partners or runs older than that file), ``checkpoint`` (path
@@ -56,7 +57,7 @@ import typing
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import jax
 import jax.numpy as jnp
@@ -66,8 +67,9 @@ import tyro
 from transam.models.base import ACC_ALL, ACC_NEWEST, MSE_ALL
 from transam.train.config import ConfigError, TrainConfig, with_added_settings
 
-EvalPartners = Literal["train", "heldout"]
-EVAL_PARTNERS: tuple[EvalPartners, ...] = ("train", "heldout")
+EVAL_PARTNERS: tuple[str, ...] = ("train", "heldout")
+EvalPartners = Annotated[str, tyro.conf.arg(metavar="{train,heldout}|DIR")]
+"""``train``, ``heldout`` or a population directory (checked by :func:`population_for`)."""
 PROBE_RIDGE = 1.0
 """Ridge penalty of the probe, on standardised features (unit variance each): small next to
 the ~N/2 training episodes, so it only regularises directions the data barely constrain (with
@@ -79,9 +81,17 @@ NO_EMBEDDING = frozenset({"nam"})
 """Methods whose z is not a learned representation (NAM: the one-hot previous action)."""
 
 
+def evaluation_label(partners: str) -> str:
+    """The name part of ``partners``' output files: ``train``, ``heldout``, or ``pop-NAME``
+    for a population directory NAME (characters outside ``[A-Za-z0-9_.-]`` become ``_``)."""
+    if partners in EVAL_PARTNERS:
+        return partners
+    return "pop-" + re.sub(r"[^A-Za-z0-9_.-]", "_", Path(partners).resolve().name)
+
+
 def evaluation_path(run_dir: str | Path, partners: str) -> Path:
     """Where :func:`evaluate_run` writes its JSON (the figure and projection sit beside it)."""
-    return Path(run_dir) / f"eval_{partners}.json"
+    return Path(run_dir) / f"eval_{evaluation_label(partners)}.json"
 
 
 # ---------------------------------------------------------------- the run directory
@@ -162,10 +172,17 @@ def find_checkpoint(run_dir: str | Path, checkpoint: str | int | None = None) ->
 def population_for(trained: str, partners: str) -> str:
     """The partner choice (make_env's ``partners``) that ``partners`` means for a run trained
     with ``trained``: "train" is the run's own population; "heldout" one it never met (the
-    held-out split; for a run trained on the held-out split, the default population)."""
+    held-out split; for a run trained on the held-out split, the default population); a
+    population directory is itself (as an absolute path)."""
+    from transam.compose import DIRECTORY_FORMAT, resolve_partners
+    from transam.partners.learned import is_population_dir
+
     if partners not in EVAL_PARTNERS:
+        if is_population_dir(partners):
+            return resolve_partners(partners)
         raise ConfigError(
-            f"unknown partners {partners!r}; valid choices: {', '.join(EVAL_PARTNERS)}"
+            f"unknown partners {partners!r}; valid choices: {', '.join(EVAL_PARTNERS)}, or "
+            f"{DIRECTORY_FORMAT}"
         )
     if partners == "train":
         return trained
@@ -358,7 +375,7 @@ def _evaluate_locked(
     notes: list[str] = []
     ckpt, state = _restore(config, run_dir, checkpoint, notes)
 
-    eval_config = dataclasses.replace(config, partners=population)  # type: ignore[arg-type]
+    eval_config = dataclasses.replace(config, partners=population)
     env, model = env_and_model(eval_config)
     teams = env.population.team_names
     partner_ids = balanced_partners(episodes, env.num_partners)
@@ -435,7 +452,7 @@ def _evaluate_locked(
             explained_variance=np.asarray(ratio),
             t=last,
         )
-        write_atomic(run_dir / f"eval_{partners}_pca.npz", buf.getvalue())
+        write_atomic(run_dir / f"eval_{evaluation_label(partners)}_pca.npz", buf.getvalue())
     out["notes"] = notes
 
     path = evaluation_path(run_dir, partners)
@@ -535,7 +552,8 @@ class Evaluate:
     episodes: int = 100
     """evaluation episodes (run in parallel; partner i mod M for episode i)"""
     partners: EvalPartners = "train"
-    """the run's training partners, or held-out ones it never met"""
+    """the run's training partners, held-out ones it never met, or a population directory
+    (manifest.json + default.safetensors; writes eval_pop-NAME.*)"""
     checkpoint: str | None = None
     """checkpoint file name or chunk number (default: the newest)"""
     seed: int = 0
@@ -570,4 +588,4 @@ class Evaluate:
         path = evaluation_path(self.run_dir, self.partners)
         console.print(f"wrote {path}, {path.with_suffix('.png')}")
         if "pca" in res:
-            console.print(f"wrote {path.with_name(f'eval_{self.partners}_pca.npz')}")
+            console.print(f"wrote {path.with_name(path.stem + '_pca.npz')}")

@@ -1,4 +1,5 @@
-"""Jitted rollouts of a controlled-agent environment with a uniformly random controlled agent.
+"""Jitted rollouts of a controlled-agent environment with a uniformly random controlled agent
+(or a given fixed policy of the controlled agent's observation).
 
 Used by the demo, the environment benchmark and the tests: one ``lax.scan`` over time of a
 ``vmap`` over environments, so no Python runs per environment step.
@@ -18,20 +19,36 @@ from transam.envs.core import ControlledEnv, EnvState, Timestep
 Rollout = Callable[[jax.Array], tuple[EnvState, Timestep]]
 
 
-def make_random_rollout(env: ControlledEnv, num_envs: int, num_steps: int) -> Rollout:
-    """A jitted ``key -> (final states, timesteps [num_steps, num_envs])`` function."""
+def make_random_rollout(
+    env: ControlledEnv,
+    num_envs: int,
+    num_steps: int,
+    policy: Callable[[jax.Array, jax.Array], jax.Array] | None = None,
+) -> Rollout:
+    """A jitted ``key -> (final states, timesteps [num_steps, num_envs])`` function; the
+    controlled agent plays uniformly at random, or ``policy(key, obs) -> action`` when given."""
     n_act = env.spec.num_actions
 
     def run(key: jax.Array) -> tuple[EnvState, Timestep]:
         key_reset, key_run = jax.random.split(key)
-        states, _ = jax.vmap(env.reset)(jax.random.split(key_reset, num_envs))
+        states, obs = jax.vmap(env.reset)(jax.random.split(key_reset, num_envs))
 
-        def one_step(states: EnvState, key: jax.Array) -> tuple[EnvState, Timestep]:
+        def one_step(
+            carry: tuple[EnvState, jax.Array], key: jax.Array
+        ) -> tuple[tuple[EnvState, jax.Array], Timestep]:
+            states, obs = carry
             key_act, key_env = jax.random.split(key)
-            actions = jax.random.randint(key_act, (num_envs,), 0, n_act, dtype=jnp.int32)
-            return jax.vmap(env.step)(jax.random.split(key_env, num_envs), states, actions)
+            if policy is None:
+                actions = jax.random.randint(key_act, (num_envs,), 0, n_act, dtype=jnp.int32)
+            else:
+                actions = jax.vmap(policy)(jax.random.split(key_act, num_envs), obs)
+            states, ts = jax.vmap(env.step)(jax.random.split(key_env, num_envs), states, actions)
+            return (states, ts.obs), ts
 
-        return jax.lax.scan(one_step, states, jax.random.split(key_run, num_steps))
+        (states, _), ts = jax.lax.scan(
+            one_step, (states, obs), jax.random.split(key_run, num_steps)
+        )
+        return states, ts
 
     return jax.jit(run)
 

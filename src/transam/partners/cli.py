@@ -260,14 +260,61 @@ class PartnersImportLiam:
 
 
 @dataclass
+class PartnersImportAuthors:
+    """Import the TransAM authors' Spread population from YOUR checkout of their repository
+    (conor-wallace/agent-transformer) into a population directory --out DIR, for
+    `--partners DIR` / make_env("spread", partners=DIR). Their repository has no licence: the
+    directory is for your own use, never to be redistributed (nothing of theirs ships with
+    transam)."""
+
+    env: tyro.conf.Positional[Literal["spread"]]
+    path: tyro.conf.Positional[Path]
+    """their repository's root (weights under pretrained_opponents/pretrained_parameters/spread/)
+    or a folder holding params_{ippo,mappo}_agent_{0..3}.pt directly"""
+    out: Path
+    """population directory to write (manifest.json + default.safetensors), outside the
+    transam package"""
+
+    def run(self) -> None:
+        from transam.partners import authors, learned
+
+        if self.out.exists() and not self.out.is_dir():
+            raise SystemExit(f"error: --out {self.out} exists and is not a directory")
+        if (
+            self.out.is_dir()
+            and any(self.out.iterdir())
+            and not (self.out / "manifest.json").exists()
+        ):
+            raise SystemExit(
+                f"error: --out {self.out} is a non-empty folder that holds no population "
+                "(manifest.json); choose an empty or new folder"
+            )
+        try:
+            path = authors.import_spread(self.path, self.out)
+        except (FileNotFoundError, ValueError) as err:
+            raise SystemExit(f"error: {err}") from None
+        pop = learned.directory_population("spread", self.out)
+        console.print(
+            f"wrote {path} and {self.out / 'default.safetensors'}: {len(authors.LEARNED)} "
+            f"learned actors (argmax) + {len(authors.MEMBER_LIST[:5])} heuristics, "
+            f"{len(pop.teams)} teams (digest {learned.directory_digest(self.out)})"
+        )
+        console.print(
+            f"use: transam train --partners {self.out} (or make_env('spread', "
+            f"partners='{self.out}')); licence: {authors.LICENCE}"
+        )
+
+
+@dataclass
 class Partners:
-    """Learned partner populations: train, import-liam, show, diversity."""
+    """Learned partner populations: train, show, diversity, import-liam, import-authors."""
 
     cmd: (
         Annotated[PartnersTrain, tyro.conf.subcommand("train")]
         | Annotated[PartnersImportLiam, tyro.conf.subcommand("import-liam")]
         | Annotated[PartnersShow, tyro.conf.subcommand("show")]
         | Annotated[PartnersDiversity, tyro.conf.subcommand("diversity")]
+        | Annotated[PartnersImportAuthors, tyro.conf.subcommand("import-authors")]
     )
 
     def run(self) -> None:

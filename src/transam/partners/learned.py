@@ -8,6 +8,15 @@ as ``<member>/<param path>`` tensors. Loading reads these files only: no network
 An imported split (Tag's default: LIAM's predators, :mod:`transam.partners.liam`) has a
 ``source`` entry (repository, commit, licence) instead of training metadata; its members name
 their ``arch`` and ``act``, and have no seed, stand-in or self-play return.
+
+A **population directory** (``make_env(env, partners=DIR)``, ``--partners DIR``) has the same
+format, one split: ``DIR/manifest.json`` with ``env``, the ``default`` split's entry (members
+and teams) and optionally ``config`` (the env config fields it was made for, e.g.
+``{"dynamics": "authors"}``) and ``name``; ``DIR/default.safetensors`` holds the weights.
+Each member names ``name``, ``kind``, ``recipe``, ``arch`` (:data:`ARCHITECTURES`), ``act``
+(``sample`` | ``argmax``) and what its architecture needs (``mlp``: ``hidden``); each team
+``name`` and ``slots`` (member names, learned or from the env's heuristic pool, slot i driving
+the i-th partner). ``transam partners import-authors`` writes one.
 """
 
 from __future__ import annotations
@@ -29,6 +38,8 @@ from safetensors.numpy import load_file, save_file
 from transam.envs.joint import JointView, play
 from transam.envs.population import Member, PolicyFn, Population, ProbsFn, Team
 from transam.partners import liam
+from transam.partners.authors import ARCH as AUTHORS_ARCH
+from transam.partners.authors import authors_logits
 from transam.partners.recipes import Recipe
 from transam.partners.train import (
     ACT_MODES,
@@ -42,6 +53,8 @@ from transam.partners.train import (
 
 SPLITS = ("default", "heldout")
 EVAL_EPISODES = 32
+DIR_SPLIT = "default"
+"""The split a population directory holds (``manifest.json``'s entry, ``default.safetensors``)."""
 
 
 def data_dir(env: str) -> Path:
@@ -296,10 +309,58 @@ def digest(env: str, split: str = "default", root: Path | None = None) -> str:
     return h.hexdigest()[:16]
 
 
+def is_population_dir(path: str | Path) -> bool:
+    """Whether ``path`` is a population directory (it holds a ``manifest.json``)."""
+    return Path(path).is_dir() and (Path(path) / "manifest.json").is_file()
+
+
+def read_population_dir(path: str | Path, env: str | None = None) -> dict[str, Any]:
+    """The manifest of population directory ``path`` (module doc), checked: it names ``env``
+    (when given) and holds the ``default`` split's entry and weights."""
+    d = Path(path)
+    try:
+        manifest = json.loads((d / "manifest.json").read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise ValueError(
+            f"population directory {str(d)!r}: unreadable manifest.json ({err})"
+        ) from None
+    if not isinstance(manifest, dict) or not isinstance(manifest.get(DIR_SPLIT), dict):
+        raise ValueError(
+            f"population directory {str(d)!r}: manifest.json has no {DIR_SPLIT!r} split entry"
+        )
+    if env is not None and manifest.get("env", env) != env:
+        raise ValueError(
+            f"population directory {str(d)!r} is for env {manifest['env']!r}, not {env!r}"
+        )
+    if not (d / f"{DIR_SPLIT}.safetensors").is_file():
+        raise ValueError(f"population directory {str(d)!r}: {DIR_SPLIT}.safetensors missing")
+    return manifest
+
+
+def directory_digest(path: str | Path) -> str:
+    """A fingerprint of what population directory ``path`` plays: its weights, its teams, how
+    each member acts (name, arch, act, hidden) and the config it names."""
+    d = Path(path)
+    manifest = read_population_dir(d)
+    entry = manifest[DIR_SPLIT]
+    h = hashlib.sha256((d / f"{DIR_SPLIT}.safetensors").read_bytes())
+    play = [
+        {k: m.get(k) for k in ("name", "arch", "act", "hidden")} for m in entry.get("members", [])
+    ]
+    what = {"teams": entry.get("teams", []), "members": play, "config": manifest.get("config")}
+    h.update(json.dumps(what, sort_keys=True).encode())
+    return h.hexdigest()[:16]
+
+
 def population_digest(env: str, partners: str) -> str | None:
-    """:func:`digest` of the population ``make_env(env, partners=partners)`` plays; None for
-    the scripted ``"heuristic"`` one (code, not data)."""
-    return None if partners == "heuristic" else digest(env, partners)
+    """The fingerprint of the population ``make_env(env, partners=partners)`` plays:
+    :func:`digest` of a shipped split, :func:`directory_digest` of a population directory;
+    None for the scripted ``"heuristic"`` one (code, not data)."""
+    if partners == "heuristic":
+        return None
+    if partners in SPLITS:
+        return digest(env, partners)
+    return directory_digest(partners)
 
 
 MemberBuilder = Callable[[dict[str, Any], dict[str, Any], str], LogitsFn]
@@ -315,6 +376,7 @@ ARCHITECTURES: dict[str, MemberBuilder] = {
     "mlp": _mlp_logits,  # our IPPO/MAPPO actor (transam.partners.train.MLP)
     "liam-ia2c": liam.ia2c_logits,  # LIAM's IA2C Tag predators
     "liam-maddpg": liam.maddpg_logits,  # LIAM's MADDPG Tag predators (BatchNorm in eval mode)
+    AUTHORS_ARCH: authors_logits,  # the TransAM authors' Spread actor (transam.partners.authors)
 }
 """Network architectures a manifest member may name (``"arch"``, default ``"mlp"``)."""
 
@@ -356,6 +418,10 @@ def learned_members(
     manifest entry says (architecture and action selection)."""
     entry = load_manifest(env, root)[split]
     params = load_params(env, split, root)
+    missing = [m["name"] for m in entry["members"] if m["name"] not in params]
+    if missing:
+        where = (root or data_dir(env)) / f"{split}.safetensors"
+        raise ValueError(f"{where}: no weights for member(s) {', '.join(missing)}")
     return {
         m["name"]: Member(
             m["name"],
@@ -387,16 +453,32 @@ def heuristic_pool(env: str) -> dict[str, Member]:
     return {m.name: m for m in lb(Config())}
 
 
-def population(env: str, split: str = "default", root: Path | None = None) -> Population:
-    """``env``'s shipped population: the teams of ``split``'s manifest, over its learned
-    members and the environment's heuristics (Tag: LIAM's 10-team table)."""
+def population(
+    env: str, split: str = "default", root: Path | None = None, name: str | None = None
+) -> Population:
+    """``env``'s shipped population (or, with ``root``, the one stored there): learned members
+    plus the heuristics its teams name (from :func:`heuristic_pool`).
+
+    """
+    learned = learned_members(env, split, root)
+    name = name or f"{env}-{split}"
     entry = load_manifest(env, root)[split]
-    pool = {**heuristic_pool(env), **learned_members(env, split, root)}
+    pool = {**heuristic_pool(env), **learned}
     teams = [Team(t["name"], tuple(t["slots"])) for t in entry["teams"]]
-    unknown = sorted({s for t in teams for s in t.slots} - set(pool))
+    if not teams:
+        raise ValueError(f"population {name!r}: the manifest lists no teams")
+    used = sorted({s for t in teams for s in t.slots})
+    unknown = [n for n in used if n not in pool]
     if unknown:
         raise ValueError(
-            f"{env}/{split} teams name unknown member(s) {unknown}; valid: {', '.join(pool)}"
+            f"population {name!r}: teams name unknown member(s) {', '.join(unknown)}; "
+            f"known: {', '.join(pool)}"
         )
-    used = sorted({s for t in teams for s in t.slots})
-    return Population(f"{env}-{split}", [pool[n] for n in used], teams)
+    return Population(name, [pool[n] for n in used], teams)
+
+
+def directory_population(env: str, path: str | Path) -> Population:
+    """The population stored in population directory ``path`` (module doc), for ``env``."""
+    manifest = read_population_dir(path, env)
+    name = manifest.get("name") or f"{env}-{Path(path).resolve().name}"
+    return population(env, DIR_SPLIT, Path(path), name=name)

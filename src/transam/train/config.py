@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from transam.compose import PARTNER_CHOICES, PartnerChoice
+from transam.compose import PartnerChoice, check_partners
 from transam.envs import ENV_NAMES, EnvError
 from transam.models import METHOD_NAMES, BaselineConfig, TransAMConfig
 
@@ -110,7 +110,9 @@ class TrainConfig:
     method: MethodName = "transam"
     """agent-modeling method"""
     partners: PartnerChoice = "default"
-    """partner population: the shipped learned one, its held-out split, or the scripted one"""
+    """partner population: the shipped learned one, its held-out split, the scripted one, or a
+    population directory (manifest.json + default.safetensors, e.g. from `transam partners
+    import-authors`)"""
     total_steps: int = 10_000_000
     """controlled-agent environment steps, summed over parallel envs (rounded up to whole
     updates)"""
@@ -150,7 +152,10 @@ class TrainConfig:
         """Raise :class:`ConfigError` for the first bad value; return ``self`` when all is well."""
         _choice("env", self.env, ENV_NAMES)
         _choice("method", self.method, METHOD_NAMES)
-        _choice("partners", self.partners, PARTNER_CHOICES)
+        try:
+            check_partners(self.partners)
+        except EnvError as err:
+            raise ConfigError(str(err)) from None
         _choice("seed_mode", self.seed_mode, ("vmap", "sequential"))
         _at_least("total_steps", self.total_steps, 1)
         _at_least("seed", self.seed, 0)

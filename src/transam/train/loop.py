@@ -3,7 +3,8 @@
 Run directory (``--out``)::
 
     config.json            the run's settings (written once, atomically)
-    partners.json          which shipped partner population it trains against (its digest)
+    partners.json          which partner population it trains against (the choice or the
+                           population directory's absolute path, and its digest)
     final.json             written last: the run is finished (its final evaluation per seed)
     metrics.jsonl          one JSON object per chunk (= per evaluation point)
     tb/                    TensorBoard event files (same scalars, plus steps/s)
@@ -51,7 +52,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from transam.compose import make_env
+from transam.compose import PARTNER_CHOICES, make_env, resolve_partners
 from transam.envs.core import ControlledEnv
 from transam.models import make_model
 from transam.models.base import ACC_NEWEST, AgentModel
@@ -268,11 +269,13 @@ def _check_population(out: Path, config: TrainConfig) -> None:
     if recorded is None:
         return
     was, now = recorded["digest"], population_record(config)["digest"]
+    shipped = config.partners in PARTNER_CHOICES
+    how = "the transam version it started with" if shipped else "the directory as it was"
     if was != now:
         raise RunDirError(
-            f"--resume: the shipped {config.env} partner population {config.partners!r} "
+            f"--resume: the {config.env} partner population {config.partners!r} "
             f"changed since the run in {str(out)!r} started (run: {was}, now: {now}); finish "
-            "it with the transam version it started with, or --force to start over"
+            f"it with {how}, or --force to start over"
         )
 
 
@@ -416,6 +419,8 @@ def train(config: TrainConfig, stop_after_chunks: int | None = None) -> RunResul
     """Run (or resume) training as ``config`` says. ``stop_after_chunks`` stops early, as a kill
     would, after that many chunks of this invocation (for tests)."""
     config.validate()
+    # A population directory is recorded (config.json, partners.json) as an absolute path.
+    config = dataclasses.replace(config, partners=resolve_partners(config.partners))
     env_and_model(config)  # bad env/model: fail before writing
     action = prepare_run_dir(config)
     out = Path(config.run_dir)
