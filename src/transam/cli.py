@@ -8,7 +8,7 @@ import statistics
 import sys
 import time
 from dataclasses import dataclass, fields
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import tyro
 from rich.console import Console
@@ -20,6 +20,9 @@ from transam.models import METHOD_NAMES
 from transam.partners.cli import Partners
 from transam.report.build import Report
 from transam.train.config import ConfigError, MethodName, TrainConfig
+from transam.train.presets import PRESET_NAMES
+
+PresetName = Literal["none", "authors"]
 
 EnvName = Literal["tag", "spread", "overcooked", "lbf"]
 ALL_ENVS: tuple[EnvName, ...] = ("tag", "spread", "overcooked", "lbf")
@@ -249,6 +252,11 @@ class Train(TrainConfig):
     population; writes config.json, partners.json, metrics.jsonl, checkpoints and TensorBoard
     files to --out. Steps are controlled-agent steps summed over parallel environments."""
 
+    preset: PresetName = "none"
+    """start from a named set of settings, then apply the other flags: 'authors' is the first
+    author's Spread training loop (transam.train.presets, README "The authors' loop");
+    `--preset authors --help` shows its values as the defaults"""
+
     def run(self) -> None:
         _run_train(TrainConfig(**{f.name: getattr(self, f.name) for f in fields(TrainConfig)}))
 
@@ -266,6 +274,8 @@ class Demo(TrainConfig):
     """run directory"""
     force: bool = True
     """start over each time (the demo's own directory)"""
+    preset: PresetName = "none"
+    """start from a named set of settings (as `transam train --preset`)"""
 
     def run(self) -> None:
         from transam.train.loop import read_metrics, seed_dirs, uniform_policy_eval
@@ -399,22 +409,48 @@ def _opt(x: float | None) -> str:
     return "-" if x is None else _num(x)
 
 
-Command = (
-    Annotated[Demo, tyro.conf.subcommand("demo")]
-    | Annotated[Envs, tyro.conf.subcommand("envs")]
-    | Annotated[Train, tyro.conf.subcommand("train")]
-    | Annotated[Evaluate, tyro.conf.subcommand("evaluate")]
-    | Annotated[Reproduce, tyro.conf.subcommand("reproduce")]
-    | Annotated[Report, tyro.conf.subcommand("report")]
-    | Annotated[Partners, tyro.conf.subcommand("partners")]
-)
+def _preset_in(argv: list[str]) -> str:
+    """The value of ``--preset`` in ``argv`` ('none' without one, or with a value tyro will
+    reject itself)."""
+    for i, arg in enumerate(argv):
+        value = argv[i + 1] if arg == "--preset" and i + 1 < len(argv) else None
+        if arg.startswith("--preset="):
+            value = arg.partition("=")[2]
+        if value is not None:
+            return value if value in PRESET_NAMES else "none"
+    return "none"
+
+
+def _with_preset(cls: type[Train] | type[Demo], preset: str) -> Train | Demo:
+    """A ``cls`` whose settings are the preset's (the defaults tyro then parses flags over)."""
+    from transam.train.presets import apply
+
+    base = apply(cls(), preset)
+    values = {f.name: getattr(base, f.name) for f in fields(TrainConfig)}
+    return cls(**values, preset=preset)  # type: ignore[arg-type]
+
+
+def command(preset: str = "none") -> Any:
+    """The ``transam`` command union; with a ``preset``, train's and demo's defaults are its."""
+    return (
+        Annotated[Demo, tyro.conf.subcommand("demo", default=_with_preset(Demo, preset))]
+        | Annotated[Envs, tyro.conf.subcommand("envs")]
+        | Annotated[Train, tyro.conf.subcommand("train", default=_with_preset(Train, preset))]
+        | Annotated[Evaluate, tyro.conf.subcommand("evaluate")]
+        | Annotated[Reproduce, tyro.conf.subcommand("reproduce")]
+        | Annotated[Report, tyro.conf.subcommand("report")]
+        | Annotated[Partners, tyro.conf.subcommand("partners")]
+    )
+
+
+Command = command()
 
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``transam`` console script."""
     _ARGV[:] = sys.argv[1:] if argv is None else argv
     cmd = tyro.cli(
-        Command,
+        command(_preset_in(_ARGV)),
         prog="transam",
         args=_ARGV,
         config=(tyro.conf.OmitSubcommandPrefixes,),

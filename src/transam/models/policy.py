@@ -12,6 +12,7 @@ cannot leak memory across an episode boundary.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -21,16 +22,46 @@ import jax.numpy as jnp
 import numpy as np
 
 from transam.models.base import LocalStep
+from transam.models.transam import uniform_init as _uniform
 
 Params = Any
 LSTMCarry = tuple[jax.Array, jax.Array]
 """(cell state c, hidden state h), each [..., hidden]."""
 
 
-def _trunk(hidden: int, carry: LSTMCarry, x: jax.Array, suffix: str) -> tuple[LSTMCarry, jax.Array]:
-    """LSTM then Linear + ReLU (orthogonal init, gain sqrt 2)."""
-    carry, y = nn.OptimizedLSTMCell(hidden, name=f"lstm{suffix}")(carry, x)
-    fc = nn.Dense(hidden, kernel_init=nn.initializers.orthogonal(np.sqrt(2)), name=f"fc{suffix}")
+def _two_uniforms(bound: float) -> Callable[..., jax.Array]:
+    """PyTorch's LSTM has two biases per gate (b_ih + b_hh), each U(-bound, bound)."""
+
+    def init(key: jax.Array, shape: Any, dtype: Any = jnp.float32) -> jax.Array:
+        k1, k2 = jax.random.split(key)
+        one = _uniform(bound)
+        return one(k1, shape, dtype) + one(k2, shape, dtype)
+
+    return init
+
+
+def _dense(features: int, fan_in: int, torch_init: bool, gain: float, name: str) -> nn.Dense:
+    """Orthogonal with ``gain`` and zero bias, or PyTorch's nn.Linear default."""
+    if torch_init:
+        init = _uniform(fan_in**-0.5)
+        return nn.Dense(features, kernel_init=init, bias_init=init, name=name)
+    return nn.Dense(features, kernel_init=nn.initializers.orthogonal(gain), name=name)
+
+
+def _trunk(
+    hidden: int, carry: LSTMCarry, x: jax.Array, suffix: str, torch_init: bool = False
+) -> tuple[LSTMCarry, jax.Array]:
+    """LSTM then Linear + ReLU (orthogonal init, gain sqrt 2; or PyTorch's defaults)."""
+    lstm_init: dict[str, Any] = {}
+    if torch_init:  # every LSTM weight and bias U(-1/sqrt(hidden), 1/sqrt(hidden))
+        bound = hidden**-0.5
+        lstm_init = {
+            "kernel_init": _uniform(bound),
+            "recurrent_kernel_init": _uniform(bound),
+            "bias_init": _two_uniforms(bound),
+        }
+    carry, y = nn.OptimizedLSTMCell(hidden, name=f"lstm{suffix}", **lstm_init)(carry, x)
+    fc = _dense(hidden, hidden, torch_init, float(np.sqrt(2)), f"fc{suffix}")
     return carry, nn.relu(fc(y))
 
 
@@ -45,6 +76,7 @@ class ActorCriticLSTM(nn.Module):
     num_actions: int
     hidden: int = 128
     critic_z: bool = True
+    torch_init: bool = False  # PyTorch's default initialisation (the reference) if set
 
     @nn.compact
     def __call__(
@@ -53,14 +85,17 @@ class ActorCriticLSTM(nn.Module):
         keep = ~first[..., None]
         carry = (jnp.where(keep, carry[0], 0.0), jnp.where(keep, carry[1], 0.0))
         x = jnp.concatenate([obs, z], axis=-1)
+        torch_init = self.torch_init
         if self.critic_z:
-            carry, h = _trunk(self.hidden, carry, x, "")
+            carry, h = _trunk(self.hidden, carry, x, "", torch_init)
             h_critic = h
         else:
             n = self.hidden
-            actor_carry, h = _trunk(self.hidden, (carry[0][..., :n], carry[1][..., :n]), x, "")
+            actor_carry, h = _trunk(
+                self.hidden, (carry[0][..., :n], carry[1][..., :n]), x, "", torch_init
+            )
             critic_carry, h_critic = _trunk(
-                self.hidden, (carry[0][..., n:], carry[1][..., n:]), obs, "_critic"
+                self.hidden, (carry[0][..., n:], carry[1][..., n:]), obs, "_critic", torch_init
             )
             carry = (
                 jnp.concatenate([actor_carry[0], critic_carry[0]], axis=-1),
@@ -68,10 +103,8 @@ class ActorCriticLSTM(nn.Module):
             )
         # Orthogonal init with the usual A2C gains: small actor head (near-uniform policy at
         # the start), unit critic head.
-        logits = nn.Dense(
-            self.num_actions, kernel_init=nn.initializers.orthogonal(0.01), name="actor"
-        )(h)
-        value = nn.Dense(1, kernel_init=nn.initializers.orthogonal(1.0), name="critic")(h_critic)
+        logits = _dense(self.num_actions, self.hidden, torch_init, 0.01, "actor")(h)
+        value = _dense(1, self.hidden, torch_init, 1.0, "critic")(h_critic)
         return carry, logits, value[..., 0]
 
 
@@ -83,10 +116,11 @@ class Policy:
     hidden: int = 128
     horizon: int | None = None  # append t / horizon to the input (None: observation only)
     critic_z: bool = True  # the critic reads z through the shared trunk (else its own, no z)
+    torch_init: bool = False  # PyTorch's default initialisation (the reference's) if set
 
     @property
     def net(self) -> ActorCriticLSTM:
-        return ActorCriticLSTM(self.num_actions, self.hidden, self.critic_z)
+        return ActorCriticLSTM(self.num_actions, self.hidden, self.critic_z, self.torch_init)
 
     def init(self, key: jax.Array, obs_dim: int, z_dim: int) -> Params:
         """Fresh parameters for observations of width ``obs_dim`` and embeddings of ``z_dim``."""

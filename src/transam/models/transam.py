@@ -2,8 +2,8 @@
 
 * Tokens: per step t, r_{t-1} (scalar), a_{t-1} (one-hot) and o_t, each through its own linear
   layer, plus a learned position-in-episode embedding of t added to all three; LayerNorm on the
-  tokens (as the authors' code). At an episode's first step there is no previous action or
-  reward: a zero one-hot and r = 0.
+  tokens (``embed_ln``; the authors' model defines that LayerNorm but never applies it). At an
+  episode's first step there is no previous action or reward: a zero one-hot and r = 0.
 * Window: the last K = ``context`` steps (3K tokens, r, a, o interleaved), left-padded; padding
   and steps from before the current episode are masked out of attention (and zeroed).
 * Encoder: ``layers`` blocks (``nn.scan``), post-norm (BERT) or pre-norm, ReLU feed-forward,
@@ -17,11 +17,13 @@
 * Reconstruction head (training only, ``params["head"]``; the encoder is ``params["encoder"]``):
   one linear layer to the joint other-agent observation, one per other agent to its action
   logits. The loss is MSE + mean over the other agents of a proper cross-entropy on logits (the
-  authors' code applies cross-entropy to softmax outputs, a double softmax; not copied). With
+  authors' code applies PyTorch's cross-entropy to softmax outputs with the other agents as the
+  class axis; ``action_loss="authors"`` reproduces it, :func:`authors_action_loss`). With
   ``recon_at="all"`` every valid observation position of every window is reconstructed, except
   positions holding steps from before the rollout (their targets are not in this rollout's
   data; they were supervised in the previous rollout), so a step early in a rollout is
-  supervised in more windows than a late one.
+  supervised in more windows than a late one. ``recon_at="window"`` also reconstructs those
+  positions when the trainer hands their targets (``prior``), as the authors' loop does.
 * Metrics (:func:`~transam.models.base.position_metrics`): ``action_accuracy_newest`` (and
   ``action_ce``, ``obs_mse``) at each window's newest position, what execution decodes and
   evaluation scores; ``action_accuracy_all_positions`` and ``obs_mse_all_positions`` over
@@ -52,6 +54,7 @@ defaults are TransAM; the method names ``transam-fuse``, ``-pool``, ``-im`` sele
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 from typing import Any, Literal, cast
@@ -94,15 +97,29 @@ class TransAMConfig:
     """post-norm (BERT, as the authors' code) or pre-norm blocks"""
     causal: bool = False
     """causal attention inside the window (the paper's encoder attends to the whole window)"""
-    recon_at: Literal["all", "last"] = "all"
-    """reconstruct at every valid observation position of each window (authors' code) or only
-    at the newest (ignored with ``pool="mean"``: one pooled z per window)"""
+    recon_at: Literal["all", "window", "last"] = "all"
+    """reconstruct at every valid observation position of each window that holds a step of
+    this rollout ('all'), at every valid position whose targets the trainer has, steps of
+    the rollouts collected before it included ('window', the authors' code), or only at the
+    newest ('last'); ignored with ``pool="mean"`` (one pooled z per window)"""
     tokens: Literal["separate", "fuse"] = "separate"
     """a token per modality (r, a, o: 3K tokens) or one fused token per step (TransAM-fuse)"""
     pool: Literal["last", "mean"] = "last"
     """z = the newest observation-token output, or their mean over the window (TransAM-pool)"""
     decoder: Literal["reconstruct", "imitate"] = "reconstruct"
     """reconstruct others' observations and actions, or imitate their actions (TransAM-im)"""
+    embed_ln: bool = True
+    """LayerNorm on the stacked tokens before the first block (the authors' model defines
+    one but never applies it; the encoder gets the summed embeddings as they are)"""
+    init: Literal["default", "authors"] = "default"
+    """initialisation: flax defaults (LeCun normal kernels, zero biases), or the authors'
+    (encoder blocks N(0, 0.02) with zero biases as BERT; token embeddings and heads PyTorch's
+    uniform +-1/sqrt(fan_in); position embedding N(0, 1))"""
+    action_loss: Literal["ce", "authors"] = "ce"
+    """the action term: mean over the other agents of the cross-entropy over actions ('ce'),
+    or the authors' bug ('authors'): PyTorch's cross-entropy applied to softmax outputs
+    shaped [other agents, actions], whose class axis is the agents, not the actions (see
+    :func:`authors_action_loss`)"""
 
 
 # --------------------------------------------------------------------------------------------
@@ -170,6 +187,9 @@ class _Block(nn.Module):
     @nn.compact
     def __call__(self, x: jax.Array, mask: jax.Array) -> tuple[jax.Array, None]:
         cfg = self.config
+        bert: dict[str, Any] = {}
+        if cfg.init == "authors":
+            bert["kernel_init"] = nn.initializers.normal(0.02)
         attn = nn.MultiHeadDotProductAttention(
             num_heads=cfg.heads,
             qkv_features=cfg.width,
@@ -178,12 +198,13 @@ class _Block(nn.Module):
             broadcast_dropout=False,  # independent masks per window
             deterministic=self.deterministic,
             name="attn",
+            **bert,
         )
         drop = nn.Dropout(cfg.dropout, deterministic=self.deterministic)
 
         def feed_forward(h: jax.Array) -> jax.Array:
-            h = nn.relu(nn.Dense(cfg.ff_width, name="ff_in")(h))
-            return nn.Dense(cfg.width, name="ff_out")(h)
+            h = nn.relu(nn.Dense(cfg.ff_width, name="ff_in", **bert)(h))
+            return nn.Dense(cfg.width, name="ff_out", **bert)(h)
 
         if cfg.norm == "post":
             x = nn.LayerNorm(name="ln_attn")(x + drop(attn(x, mask=mask)))
@@ -214,19 +235,29 @@ class _Encoder(nn.Module):
         action = jax.nn.one_hot(jnp.where(valid, w.prev_action, -1), self.num_actions)
         # Clipped: jnp.take would read NaN past the table (an episode longer than episode_len).
         t = jnp.clip(jnp.where(valid, w.t, 0), 0, self.episode_len - 1)
-        pos = nn.Embed(self.episode_len, cfg.width, name="embed_t")(t)
+        authors = cfg.init == "authors"
+        embed_init: dict[str, Any] = {}
+        if authors:
+            embed_init["embedding_init"] = nn.initializers.normal(1.0)
+        pos = nn.Embed(self.episode_len, cfg.width, name="embed_t", **embed_init)(t)
+
+        def embed(h: jax.Array, name: str) -> jax.Array:
+            return _dense(cfg.width, h.shape[-1], authors, name)(h)
+
         if cfg.tokens == "separate":  # (r_{t-1}, a_{t-1}, o_t) per step
             step_tokens = [
-                nn.Dense(cfg.width, name="embed_r")(reward),
-                nn.Dense(cfg.width, name="embed_a")(action),
-                nn.Dense(cfg.width, name="embed_o")(obs),
+                embed(reward, "embed_r"),
+                embed(action, "embed_a"),
+                embed(obs, "embed_o"),
             ]
         else:  # one token per step from concat(r_{t-1}, a_{t-1}, o_t)
             fused = jnp.concatenate([reward, action, obs], axis=-1)
-            step_tokens = [nn.Dense(cfg.width, name="embed_step")(fused)]
+            step_tokens = [embed(fused, "embed_step")]
         n = len(step_tokens)  # tokens per step; the observation's (or the fused) token is last
         tokens = jnp.stack(step_tokens, axis=-2) + pos[..., None, :]  # [..., K, n, width]
-        x = nn.LayerNorm(name="embed_ln")(tokens.reshape(*batch, n * k, cfg.width))
+        x = tokens.reshape(*batch, n * k, cfg.width)
+        if cfg.embed_ln:
+            x = nn.LayerNorm(name="embed_ln")(x)
 
         tok_valid = jnp.repeat(valid, n, axis=-1)  # [..., nK]
         mask = tok_valid[..., :, None] & tok_valid[..., None, :]  # [..., query, key]
@@ -248,19 +279,69 @@ class _Encoder(nn.Module):
         return x.reshape(*batch, k, n, cfg.width)[..., -1, :]
 
 
+def uniform_init(bound: float) -> Callable[..., jax.Array]:
+    """An initialiser drawing U(-bound, bound)."""
+
+    def init(key: jax.Array, shape: Any, dtype: Any = jnp.float32) -> jax.Array:
+        return jax.random.uniform(key, shape, dtype, -bound, bound)
+
+    return init
+
+
+def torch_uniform(fan_in: int) -> Callable[..., jax.Array]:
+    """PyTorch's default for a Linear layer's weight and bias: U(-1/sqrt(fan_in), +...)."""
+    return uniform_init(fan_in**-0.5)
+
+
+def _dense(features: int, fan_in: int, torch_init: bool, name: str) -> nn.Dense:
+    """A Dense layer, initialised as PyTorch's nn.Linear when ``torch_init``."""
+    if not torch_init:
+        return nn.Dense(features, name=name)
+    init = torch_uniform(fan_in)
+    return nn.Dense(features, kernel_init=init, bias_init=init, name=name)
+
+
 class _Head(nn.Module):
     """Reconstruction head: z -> (joint other-agent obs, per-agent action logits)."""
 
     num_others: int
     other_obs_dim: int
     other_num_actions: int
+    torch_init: bool = False
 
     @nn.compact
     def __call__(self, z: jax.Array) -> tuple[jax.Array, jax.Array]:
-        obs = nn.Dense(self.num_others * self.other_obs_dim, name="obs")(z)
+        width = z.shape[-1]
+        obs = _dense(self.num_others * self.other_obs_dim, width, self.torch_init, "obs")(z)
         # A kernel [width, N, A]: N independent linear layers, one per other agent.
-        logits = nn.DenseGeneral((self.num_others, self.other_num_actions), name="actions")(z)
+        init: dict[str, Any] = {}
+        if self.torch_init:
+            init = {"kernel_init": torch_uniform(width), "bias_init": torch_uniform(width)}
+        shape = (self.num_others, self.other_num_actions)
+        logits = nn.DenseGeneral(shape, name="actions", **init)(z)
         return obs, logits
+
+
+def authors_action_loss(logits: jax.Array, actions: jax.Array) -> jax.Array:
+    """The authors' action term, bug included: [..., N, A] logits and [..., N] actions -> [...].
+
+    Their code passes softmax probabilities shaped (batch, N other agents, A actions) and the
+    one-hot actions to ``torch.nn.functional.cross_entropy``, which takes dimension 1 as the
+    class axis: for each action a it is a cross-entropy over the *agents* of the probabilities
+    p_i(a), and the mean reduction divides by A. Per position::
+
+        -(1/A) sum_a sum_i onehot_i(a) log softmax_i(p_.(a))
+
+    What it changes: it only rewards p_i(a_i) above the other agents' p_j(a_i), not above
+    agent i's other actions; with all probabilities in [0, 1] the softmax over agents can only
+    reach e/(e + N - 1), so the loss saturates (2 ln 2 / 5 = 0.277 at a uniform head for N = 2,
+    their logged start), and where agents take the same action the terms cancel. A weak,
+    bounded push towards the right argmax, and small next to the observation MSE.
+    """
+    probs = jax.nn.softmax(logits, axis=-1)
+    onehot = jax.nn.one_hot(actions, logits.shape[-1])
+    over_agents = jax.nn.log_softmax(probs, axis=-2)
+    return -jnp.sum(onehot * over_agents, axis=(-2, -1)) / logits.shape[-1]
 
 
 @partial(jax.jit, static_argnums=0)
@@ -301,7 +382,7 @@ class TransAM:
             raise ValueError(f"TransAM width {cfg.width} must be divisible by heads {cfg.heads}")
         if not 0.0 <= cfg.dropout < 1.0:
             raise ValueError(f"TransAM dropout must be in [0, 1); got {cfg.dropout}")
-        if cfg.norm not in ("post", "pre") or cfg.recon_at not in ("all", "last"):
+        if cfg.norm not in ("post", "pre") or cfg.recon_at not in ("all", "window", "last"):
             raise ValueError(f"TransAM norm/recon_at invalid: {cfg.norm!r}, {cfg.recon_at!r}")
         if (
             cfg.tokens not in ("separate", "fuse")
@@ -314,6 +395,11 @@ class TransAM:
             )
         if self.decoder_hidden < 1:
             raise ValueError(f"TransAM decoder_hidden must be >= 1; got {self.decoder_hidden}")
+        if cfg.init not in ("default", "authors") or cfg.action_loss not in ("ce", "authors"):
+            raise ValueError(
+                f"TransAM init/action_loss invalid: {cfg.init!r}, {cfg.action_loss!r}; "
+                "valid: default|authors, ce|authors"
+            )
 
     @property
     def name(self) -> str:
@@ -338,7 +424,9 @@ class TransAM:
         s = self.spec
         if self.config.decoder == "imitate":
             return ImitationHead(s.num_others, s.other_num_actions, self.decoder_hidden)
-        return _Head(s.num_others, s.other_obs_dim, s.other_num_actions)
+        return _Head(
+            s.num_others, s.other_obs_dim, s.other_num_actions, self.config.init == "authors"
+        )
 
     def _encode(self, params: Params, w: WindowCarry, key: jax.Array | None = None) -> jax.Array:
         """E^o [..., K, width] of windows ``w``; dropout only when ``key`` is given."""
@@ -365,7 +453,13 @@ class TransAM:
         # Settings that do not change the parameters are normalised so that models differing
         # only in them share one compiled init.
         shape_cfg = dataclasses.replace(
-            self.config, context=1, dropout=0.0, causal=False, recon_at="all", pool="last"
+            self.config,
+            context=1,
+            dropout=0.0,
+            causal=False,
+            recon_at="all",
+            pool="last",
+            action_loss="ce",
         )
         return _init_params(dataclasses.replace(self, config=shape_cfg), key)
 
@@ -391,10 +485,11 @@ class TransAM:
         return jax.tree.map(lambda c, n: jnp.concatenate([c[1:], n[None]], axis=0), carry, new)
 
     def step(
-        self, params: Params, carry: WindowCarry, x: LocalStep
+        self, params: Params, carry: WindowCarry, x: LocalStep, key: jax.Array | None = None
     ) -> tuple[WindowCarry, jax.Array]:
+        """(carry, z_t); dropout on only when ``key`` is given (the trainer's act_dropout)."""
         carry = self.push(carry, x)
-        z = self._pool(self._encode(params, carry), carry.valid)
+        z = self._pool(self._encode(params, carry, key), carry.valid)
         return carry, z
 
     def _windows(self, carry: WindowCarry, xs: LocalStep) -> WindowCarry:
@@ -415,9 +510,11 @@ class TransAM:
         same = episode[idx] == episode[idx[:, -1:]]
         return win.replace(valid=win.valid & same)
 
-    def embed_rollout(self, params: Params, carry: WindowCarry, xs: LocalStep) -> jax.Array:
+    def embed_rollout(
+        self, params: Params, carry: WindowCarry, xs: LocalStep, key: jax.Array | None = None
+    ) -> jax.Array:
         win = self._windows(carry, xs)
-        return self._pool(self._encode(params, win), win.valid)
+        return self._pool(self._encode(params, win, key), win.valid)
 
     def decode(self, params: Params, z: jax.Array, other_obs: jax.Array | None = None) -> Decoded:
         """(joint other-agent obs, action logits) from z [..., width]; with
@@ -453,12 +550,19 @@ class TransAM:
         xs: LocalStep,
         targets: PartnerRecord,
         key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
-        """:meth:`rollout_loss` averaged over a batch of rollouts (time-major [T, N])."""
+        """:meth:`rollout_loss` averaged over a batch of rollouts (time-major [T, N]);
+        ``prior`` [K-1, N] and ``prior_ok`` [K-1, N] as there."""
         n = xs.first.shape[1]
         keys = None if key is None else jax.random.split(key, n)
-        fn = jax.vmap(self.rollout_loss, in_axes=(None, 0, 1, 1, 0))
-        total, metrics = fn(params, carry, xs, targets, keys)
+        if prior is None:
+            fn = jax.vmap(self.rollout_loss, in_axes=(None, 0, 1, 1, 0))
+            total, metrics = fn(params, carry, xs, targets, keys)
+        else:
+            fn = jax.vmap(self.rollout_loss, in_axes=(None, 0, 1, 1, 0, 1, 1))
+            total, metrics = fn(params, carry, xs, targets, keys, prior, prior_ok)
         return total.mean(), {k: v.mean() for k, v in metrics.items()}
 
     def rollout_loss(
@@ -468,8 +572,15 @@ class TransAM:
         xs: LocalStep,
         targets: PartnerRecord,
         key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         """Decoder loss over ONE rollout's windows (dropout only when ``key`` is given).
+
+        With ``recon_at="window"`` and ``prior`` (the targets of the K-1 steps before the
+        rollout, oldest first; ``prior_ok`` [K-1] marks those the trainer has), positions
+        holding those steps are reconstructed too, as the authors' loop does for the earlier
+        chunks of its episode. Without ``prior``, "window" is "all".
 
         Window i ends at rollout step i; its observation position k holds rollout step
         j = i + k - (K-1), decoded from E^o at that position (``recon_at="all"``: every
@@ -494,7 +605,14 @@ class TransAM:
         if self.config.pool == "mean":  # one decoded embedding per window: [T, 1, width]
             emb, j = self._pool(emb, win.valid)[:, None], jnp.arange(num_steps)[:, None]
             weight = jnp.ones(j.shape)
-        elif self.config.recon_at == "all":
+        elif self.config.recon_at == "window" and prior is not None:
+            assert prior_ok is not None
+            targets = jax.tree.map(lambda p, t: jnp.concatenate([p, t]), prior, targets)
+            have = jnp.concatenate([prior_ok.astype(bool), jnp.ones((num_steps,), bool)])
+            j = j + (k - 1)  # index into prior ++ targets
+            num_steps = num_steps + k - 1
+            weight = (win.valid & have[j]).astype(jnp.float32)
+        elif self.config.recon_at in ("all", "window"):
             weight = (win.valid & (j >= 0)).astype(jnp.float32)
         else:
             weight = jnp.zeros((num_steps, k)).at[:, -1].set(1.0)
@@ -505,7 +623,10 @@ class TransAM:
         assert logits is not None  # both decoders predict actions
         ce_each = optax.softmax_cross_entropy_with_integer_labels(logits, tgt_act)  # [T, P, N]
         ce = jnp.mean(ce_each, axis=-1)
-        per_position = ce
+        action_term = ce
+        if self.config.action_loss == "authors":
+            action_term = authors_action_loss(logits, tgt_act)
+        per_position = action_term
         mse = None
         if pred_obs is not None:
             tgt_obs = tgt_other.reshape(*tgt_other.shape[:2], -1)

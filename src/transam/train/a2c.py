@@ -21,12 +21,22 @@ step on the rollout's last observation: acting on it again after the update (wit
 parameters) keeps the next rollout exactly on-policy, as PureJaxRL and SB3 do.
 
 Episodes end by time limit or termination alike (``done``); no bootstrapping across ``done``,
-as in the reference A2C. So that the critic can see a time limit coming, the policy input
-includes the agent's clock t / episode_len (``time_feature``; the reference has none). With
+as in the reference A2C (``end_bootstrap="return_mean"``: at a time limit, from the running
+mean of returns, which is what the reference's code does). So that the critic can see a time
+limit coming, the policy input includes the agent's clock t / episode_len (``time_feature``;
+the reference has none). With
 ``normalize_returns`` the critic predicts standardised returns (running mean/std of the GAE
 returns) and advantages are divided by the same std. The value loss is 0.5 * squared error
 (the paper's A2C objective) times ``vf_coef``. Steps are controlled-agent steps summed over
 parallel environments.
+
+The reference's scheme (``rollouts_per_collect`` C > 1, see :func:`make_update`): C rollouts
+are collected with the same parameters (returns and the return normaliser computed rollout by
+rollout as they come in), then C updates run in order, update c on rollout c, each from the
+policy carry and window that acting had at the start of rollout c. The settings
+``advantage``, ``value_loss``, ``end_bootstrap``, ``act_dropout``, ``recompute_z`` and the
+model's ``recon_at="window"`` reproduce the rest of the reference's update
+(:mod:`transam.train.presets`).
 """
 
 from __future__ import annotations
@@ -43,6 +53,7 @@ from flax import struct
 from transam.envs.core import ControlledEnv, EnvState, PartnerRecord
 from transam.models.base import AgentModel, LocalStep, PartnerView, PrivilegedModel
 from transam.models.policy import Policy
+from transam.models.transam import TransAM
 from transam.train.config import TrainConfig
 
 Metrics = dict[str, jax.Array]
@@ -104,6 +115,7 @@ class Trajectory:
     action: jax.Array
     reward: jax.Array
     done: jax.Array
+    truncated: jax.Array  # done by the time limit (not by termination)
     value: jax.Array  # critic output (normalised scale when normalize_returns)
     record: PartnerRecord  # training-only targets of the agent-model loss
     partner: PartnerView | None  # the Oracle's execution-time partner input (None otherwise)
@@ -117,14 +129,28 @@ def steps_per_update(config: TrainConfig) -> int:
 
 
 def total_updates(config: TrainConfig) -> int:
-    """Updates in the run: total_steps rounded up to whole updates."""
-    return -(-config.total_steps // steps_per_update(config))
+    """Updates in the run: total_steps rounded up to whole collections (of
+    ``rollouts_per_collect`` updates each)."""
+    per_collect = steps_per_update(config) * config.a2c.rollouts_per_collect
+    return -(-config.total_steps // per_collect) * config.a2c.rollouts_per_collect
+
+
+def anneal_updates(config: TrainConfig) -> int:
+    """Updates over which an annealed policy learning rate falls to 0."""
+    steps = config.a2c.anneal_steps
+    return -(-steps // steps_per_update(config)) if steps else total_updates(config)
 
 
 def make_policy(config: TrainConfig, env: ControlledEnv) -> Policy:
     a = config.a2c
     horizon = env.spec.episode_len if a.time_feature else None
-    return Policy(env.spec.num_actions, a.hidden, horizon=horizon, critic_z=a.critic_z)
+    return Policy(
+        env.spec.num_actions,
+        a.hidden,
+        horizon=horizon,
+        critic_z=a.critic_z,
+        torch_init=a.init == "torch",
+    )
 
 
 def make_optimizers(config: TrainConfig) -> tuple[optax.GradientTransformation, ...]:
@@ -132,7 +158,7 @@ def make_optimizers(config: TrainConfig) -> tuple[optax.GradientTransformation, 
     a = config.a2c
     lr: float | optax.Schedule = a.lr
     if a.anneal_lr:
-        lr = optax.linear_schedule(a.lr, 0.0, total_updates(config))
+        lr = optax.linear_schedule(a.lr, 0.0, anneal_updates(config))
     policy_tx = optax.chain(
         optax.clip_by_global_norm(a.max_grad_norm), optax.adam(lr, eps=a.adam_eps)
     )
@@ -167,9 +193,19 @@ def partner_view(model: AgentModel, env_state: EnvState) -> PartnerView | None:
 
 
 def model_step(
-    model: AgentModel, params: Any, carry: Any, x: LocalStep, partner: PartnerView | None
+    model: AgentModel,
+    params: Any,
+    carry: Any,
+    x: LocalStep,
+    partner: PartnerView | None,
+    key: jax.Array | None = None,
 ) -> tuple[Any, jax.Array]:
-    """``model.step`` on a batch; only a privileged model is handed the partner view."""
+    """``model.step`` on a batch; only a privileged model is handed the partner view. With a
+    ``key`` (``act_dropout``; TransAM family only) the model applies dropout, one key per env."""
+    if key is not None:
+        keys = jax.random.split(key, x.first.shape[0])
+        stochastic: Any = model
+        return jax.vmap(stochastic.step, in_axes=(None, 0, 0, 0))(params, carry, x, keys)
     if partner is None:
         return jax.vmap(model.step, in_axes=(None, 0, 0))(params, carry, x)
     oracle: PrivilegedModel = model  # type: ignore[assignment]
@@ -185,11 +221,12 @@ def act(
     model_carry: Any,
     x: LocalStep,
     env_state: EnvState,
+    key: jax.Array | None = None,
 ) -> tuple[Any, Any, jax.Array, jax.Array, jax.Array]:
     """Execution path on a batch (``x`` is what the agent knows in ``env_state``): (policy
-    carry, model carry, z, logits, value)."""
+    carry, model carry, z, logits, value). ``key``: the model's dropout (``act_dropout``)."""
     partner = partner_view(model, env_state)
-    model_carry, z = model_step(model, model_params, model_carry, x, partner)
+    model_carry, z = model_step(model, model_params, model_carry, x, partner, key)
     policy_carry, logits, value = policy.step(policy_params, policy_carry, x, z)
     return policy_carry, model_carry, z, logits, value
 
@@ -247,33 +284,36 @@ def make_rollout(
 ) -> Callable[[RunnerState, jax.Array], tuple[RunnerState, Trajectory]]:
     """``(state, key) -> (state after n_steps, trajectory)`` (pure; not jitted)."""
     policy = make_policy(config, env)
+    dropout = config.a2c.act_dropout
 
     def rollout(rs: RunnerState, key: jax.Array) -> tuple[RunnerState, Trajectory]:
         def body(carry: tuple[Any, ...], key: jax.Array) -> tuple[tuple[Any, ...], Any]:
             env_state, x, pc, mc, ep_ret = carry
             k_act, k_env = jax.random.split(key)
+            k_drop = jax.random.fold_in(key, 1) if dropout else None
             partner = partner_view(model, env_state)
             pc, mc, z, logits, value = act(
-                policy, model, rs.policy_params, rs.model_params, pc, mc, x, env_state
+                policy, model, rs.policy_params, rs.model_params, pc, mc, x, env_state, k_drop
             )
             action = jax.random.categorical(k_act, logits).astype(jnp.int32)
             env_state, ts, x_next = env_step(env, k_env, env_state, action)
             ep_ret = ep_ret + ts.reward
             finished = jnp.where(ts.done, ep_ret, 0.0)
             ep_ret = jnp.where(ts.done, 0.0, ep_ret)
-            out = (x, z, action, ts.reward, ts.done, value, ts.record, partner, finished)
-            return (env_state, x_next, pc, mc, ep_ret), out
+            out = (x, z, action, ts.reward, ts.done, ts.truncated, value, ts.record, partner)
+            return (env_state, x_next, pc, mc, ep_ret), (*out, finished)
 
         init = (rs.env_state, rs.x, rs.policy_carry, rs.model_carry, rs.ep_return)
         keys = jax.random.split(key, config.a2c.n_steps)
         (env_state, x, pc, mc, ep_ret), outs = jax.lax.scan(body, init, keys)
-        x_seq, z, action, reward, done, value, record, partner, finished = outs
+        x_seq, z, action, reward, done, truncated, value, record, partner, finished = outs
         traj = Trajectory(
             x=x_seq,
             z=z,
             action=action,
             reward=reward,
             done=done,
+            truncated=truncated,
             value=value,
             record=record,
             partner=partner,
@@ -302,21 +342,28 @@ def gae(
     last_value: jax.Array,
     gamma: float,
     lam: float,
+    end_value: jax.Array | None = None,
+    truncated: jax.Array | None = None,
 ) -> tuple[jax.Array, jax.Array]:
-    """(advantages, returns), time-major; nothing is bootstrapped across ``done``."""
+    """(advantages, returns), time-major; nothing is bootstrapped across ``done``. With
+    ``end_value`` and ``truncated``, a step that ends its episode by the time limit bootstraps
+    from ``end_value`` instead of 0 (the advantage recursion still stops there)."""
+    if end_value is None or truncated is None:
+        end_value, truncated = jnp.zeros_like(last_value), jnp.zeros_like(done)
 
     def body(carry: tuple[jax.Array, jax.Array], inp: tuple[jax.Array, ...]) -> Any:
         next_adv, next_value = carry
-        r, v, d = inp
+        r, v, d, tr = inp
         cont = 1.0 - d.astype(jnp.float32)
-        delta = r + gamma * next_value * cont - v
+        end = tr.astype(jnp.float32) * end_value
+        delta = r + gamma * (next_value * cont + end) - v
         adv = delta + gamma * lam * cont * next_adv
         return (adv, v), adv
 
     _, adv = jax.lax.scan(
         body,
         (jnp.zeros_like(last_value), last_value),
-        (reward, value, done),
+        (reward, value, done, truncated),
         reverse=True,
     )
     return adv, adv + value
@@ -329,31 +376,57 @@ def a2c_losses(
     z: jax.Array,
     advantages: jax.Array,
     targets: jax.Array,
+    advantage: str = "gae",
+    value_loss: str = "half_squared",
+    normalize_advantages: bool = False,
 ) -> dict[str, jax.Array]:
-    """Policy-gradient, value and entropy terms of the rollout (means over steps and envs)."""
+    """Policy-gradient, value and entropy terms of the rollout (means over steps and envs).
+
+    ``advantage="gae"``: the policy gradient weighs log pi by ``advantages``;
+    ``"recomputed"`` (the reference): by ``targets`` minus the value the critic gives now
+    (``advantages`` unused). ``value_loss``: 0.5 (R - V)^2 or (R - V)^2 (the reference).
+    """
     _, logits, values = policy.unroll(policy_params, traj.policy_carry0, traj.x, z)
     logp_all = jax.nn.log_softmax(logits)
     logp = jnp.take_along_axis(logp_all, traj.action[..., None], axis=-1)[..., 0]
     entropy = -(jnp.exp(logp_all) * logp_all).sum(-1).mean()
+    if advantage == "recomputed":
+        advantages = targets - values
+    advantages = jax.lax.stop_gradient(advantages)
+    adv_mean = advantages.mean()
+    if normalize_advantages and advantage == "recomputed":
+        advantages = (advantages - adv_mean) / (advantages.std() + 1e-8)
+    scale = 0.5 if value_loss == "half_squared" else 1.0
     return {
-        "policy_loss": -(jax.lax.stop_gradient(advantages) * logp).mean(),
-        "value_loss": 0.5 * ((values - targets) ** 2).mean(),
+        "policy_loss": -(advantages * logp).mean(),
+        "value_loss": scale * ((values - targets) ** 2).mean(),
         "entropy": entropy,
+        "advantage_mean": adv_mean,
     }
 
 
-def make_update(
+@struct.dataclass
+class Collected:
+    """What one rollout of a collection leaves for its update (time-major [T, num_envs])."""
+
+    traj: Trajectory
+    advantages: jax.Array  # GAE advantages (divided by the return std when normalised)
+    targets: jax.Array  # value targets (standardised when normalised)
+
+
+def make_collect(
     config: TrainConfig, env: ControlledEnv, model: AgentModel
-) -> Callable[[RunnerState], tuple[RunnerState, Metrics]]:
-    """One A2C + agent-model update (pure; not jitted)."""
+) -> Callable[[RunnerState, jax.Array], tuple[RunnerState, Collected]]:
+    """``(state, keys [C]) -> (state, Collected [C, T, ...])``: C rollouts with the state's
+    parameters, each followed by its bootstrap value (acting on the next observation with the
+    same parameters), GAE and the update of the return normaliser (pure; not jitted)."""
     a = config.a2c
     policy = make_policy(config, env)
-    policy_tx, model_tx = make_optimizers(config)
     rollout = make_rollout(config, env, model)
 
-    def update(rs: RunnerState) -> tuple[RunnerState, Metrics]:
-        key, k_roll, k_loss = jax.random.split(jax.random.wrap_key_data(rs.key), 3)
-        rs, traj = rollout(rs, k_roll)
+    def one(rs: RunnerState, key: jax.Array) -> tuple[RunnerState, Collected]:
+        rs, traj = rollout(rs, key)
+        k_drop = jax.random.fold_in(key, 1) if a.act_dropout else None
         _, _, _, _, last_value = act(
             policy,
             model,
@@ -363,13 +436,26 @@ def make_update(
             rs.model_carry,
             rs.x,
             rs.env_state,
+            k_drop,
         )
         stat = rs.ret_stat
         if a.normalize_returns:
             value, last_value = traj.value * stat.std + stat.mean, last_value * stat.std + stat.mean
         else:
             value = traj.value
-        adv, returns = gae(traj.reward, value, traj.done, last_value, a.gamma, a.gae_lambda)
+        # The reference bootstraps an episode's end from 0 in normalised units, i.e. from the
+        # running mean of returns once de-normalised (its done flags never cut the last step).
+        end_value = stat.mean if a.end_bootstrap == "return_mean" else None
+        adv, returns = gae(
+            traj.reward,
+            value,
+            traj.done,
+            last_value,
+            a.gamma,
+            a.gae_lambda,
+            end_value,
+            traj.truncated,
+        )
         if a.normalize_returns:
             # The critic regresses standardised returns, and the advantages are put on the
             # same scale (as the reference's "normalised return - value"), so that the entropy
@@ -379,30 +465,100 @@ def make_update(
             adv = adv / stat.std
         else:
             targets = returns
-        adv_mean = adv.mean()  # ~0 when the critic is unbiased
-        if a.normalize_advantages:
-            adv = (adv - adv_mean) / (adv.std() + 1e-8)
+        return dataclasses.replace(rs, ret_stat=stat), Collected(traj, adv, targets)
 
-        def loss_fn(policy_params: Any, model_params: Any) -> tuple[jax.Array, Metrics]:
-            if a.backprop_encoder and traj.partner is not None:
+    def collect(rs: RunnerState, keys: jax.Array) -> tuple[RunnerState, Collected]:
+        return jax.lax.scan(one, rs, keys)
+
+    return collect
+
+
+def _prior_records(
+    records: PartnerRecord, index: jax.Array, k: int
+) -> tuple[PartnerRecord, jax.Array]:
+    """The K-1 = ``k`` records before rollout ``index`` of a collection ([C, T, N, ...]), and
+    which of them exist (those from before the collection do not): [k, N, ...], [k, N]."""
+    c, t, n = records.t.shape
+    flat = jax.tree.map(lambda r: r.reshape(c * t, *r.shape[2:]), records)
+    padded = jax.tree.map(lambda r: jnp.concatenate([jnp.zeros_like(r[:k]), r]), flat)
+    start = index * t  # padded[start + i] is step index * t - k + i of the collection
+    prior = jax.tree.map(lambda r: jax.lax.dynamic_slice_in_dim(r, start, k), padded)
+    ok = (start - k + jnp.arange(k)) >= 0
+    return prior, jnp.broadcast_to(ok[:, None], (k, n))
+
+
+def make_update(
+    config: TrainConfig, env: ControlledEnv, model: AgentModel
+) -> Callable[[RunnerState], tuple[RunnerState, Metrics]]:
+    """One collection and its updates (pure; not jitted): ``rollouts_per_collect`` = C
+    rollouts collected with the same parameters (:func:`make_collect`), then C A2C +
+    agent-model updates in order, update c on rollout c, each a gradient step of both
+    networks from the parameters the previous one left. C = 1 (the default) is plain A2C:
+    rollout, update. Metrics are means over the C updates (``episodes``, ``return_sum``:
+    sums)."""
+    a = config.a2c
+    num = a.rollouts_per_collect
+    policy = make_policy(config, env)
+    policy_tx, model_tx = make_optimizers(config)
+    collect = make_collect(config, env, model)
+    prior_k = 0
+    if isinstance(model, TransAM) and model.config.recon_at == "window":
+        prior_k = model.config.context - 1  # positions before a rollout get their targets
+
+    def learn(
+        rs: RunnerState, col: Collected, key: jax.Array, index: jax.Array, records: PartnerRecord
+    ) -> tuple[RunnerState, Metrics]:
+        traj, adv, targets = col.traj, col.advantages, col.targets
+        adv_mean = adv.mean()  # ~0 when the critic is unbiased
+        if a.normalize_advantages and a.advantage == "gae":
+            adv = (adv - adv_mean) / (adv.std() + 1e-8)
+        prior: dict[str, Any] = {}
+        if prior_k:
+            prior["prior"], prior["prior_ok"] = _prior_records(records, index, prior_k)
+        z_keys = None
+        if a.act_dropout:  # the policy's z is recomputed (or back-propagated) with dropout
+            z_keys = jax.random.split(jax.random.fold_in(key, 1), traj.x.first.shape[1])
+
+        def embed(model_params: Any) -> jax.Array:
+            if traj.partner is not None:
                 oracle: PrivilegedModel = model  # type: ignore[assignment]
-                z = jax.vmap(oracle.embed_rollout, in_axes=(None, 0, 1, 1), out_axes=1)(
+                return jax.vmap(oracle.embed_rollout, in_axes=(None, 0, 1, 1), out_axes=1)(
                     model_params, traj.model_carry0, traj.x, traj.partner
                 )
-            elif a.backprop_encoder:
-                z = jax.vmap(model.embed_rollout, in_axes=(None, 0, 1), out_axes=1)(
-                    model_params, traj.model_carry0, traj.x
+            if z_keys is not None:
+                stochastic: Any = model
+                return jax.vmap(stochastic.embed_rollout, in_axes=(None, 0, 1, 0), out_axes=1)(
+                    model_params, traj.model_carry0, traj.x, z_keys
                 )
+            return jax.vmap(model.embed_rollout, in_axes=(None, 0, 1), out_axes=1)(
+                model_params, traj.model_carry0, traj.x
+            )
+
+        def loss_fn(policy_params: Any, model_params: Any) -> tuple[jax.Array, Metrics]:
+            if a.backprop_encoder:
+                z = embed(model_params)
+            elif a.recompute_z:  # the model's current parameters, no gradient into it
+                z = jax.lax.stop_gradient(embed(model_params))
             else:
                 z = traj.z
-            terms = a2c_losses(policy, policy_params, traj, z, adv, targets)
+            terms = a2c_losses(
+                policy,
+                policy_params,
+                traj,
+                z,
+                adv,
+                targets,
+                advantage=a.advantage,
+                value_loss=a.value_loss,
+                normalize_advantages=a.normalize_advantages,
+            )
             a2c = (
                 terms["policy_loss"]
                 + a.vf_coef * terms["value_loss"]
                 - a.ent_coef * terms["entropy"]
             )
             am, am_metrics = model.loss(
-                model_params, traj.model_carry0, traj.x, traj.record, k_loss
+                model_params, traj.model_carry0, traj.x, traj.record, key, **prior
             )
             metrics = dict(terms)
             metrics["model_loss"] = am
@@ -417,7 +573,8 @@ def make_update(
         model_params = optax.apply_updates(rs.model_params, upd)
         metrics["grad_norm/policy"] = optax.tree.norm(g_policy)
         metrics["grad_norm/model"] = optax.tree.norm(g_model)
-        metrics["advantage_mean"] = adv_mean
+        if a.advantage == "gae":
+            metrics["advantage_mean"] = adv_mean
         metrics["episodes"] = traj.done.sum(dtype=jnp.int32)
         metrics["return_sum"] = traj.finished_return.sum()
         rs = dataclasses.replace(
@@ -426,32 +583,58 @@ def make_update(
             policy_opt=policy_opt,
             model_params=model_params,
             model_opt=model_opt,
-            ret_stat=stat,
-            key=jax.random.key_data(key),
             update=rs.update + 1,
         )
         return rs, metrics
 
+    def update(rs: RunnerState) -> tuple[RunnerState, Metrics]:
+        key, k_roll, k_loss = jax.random.split(jax.random.wrap_key_data(rs.key), 3)
+        # One rollout (the default) uses k_roll and k_loss themselves, as before collections.
+        roll_keys = k_roll[None] if num == 1 else jax.random.split(k_roll, num)
+        loss_keys = k_loss[None] if num == 1 else jax.random.split(k_loss, num)
+        rs, collected = collect(rs, roll_keys)
+        records = collected.traj.record
+
+        def body(rs: RunnerState, inp: tuple[Any, ...]) -> tuple[RunnerState, Metrics]:
+            col, k, index = inp
+            return learn(rs, col, k, index, records)
+
+        rs, metrics = jax.lax.scan(body, rs, (collected, loss_keys, jnp.arange(num)))
+        rs = dataclasses.replace(rs, key=jax.random.key_data(key))
+        return rs, _reduce(metrics)
+
     return update
+
+
+_SUMMED = ("episodes", "return_sum")
+
+
+def _reduce(metrics: Metrics) -> Metrics:
+    """Metrics stacked over updates -> sums of ``episodes`` and ``return_sum``, means of the
+    rest."""
+    return {k: v.sum(0) if k in _SUMMED else v.mean(0) for k, v in metrics.items()}
 
 
 def make_chunk(
     config: TrainConfig, env: ControlledEnv, model: AgentModel, num_updates: int
 ) -> Callable[[RunnerState], tuple[RunnerState, Metrics]]:
-    """A jitted ``state -> (state, metrics)`` doing ``num_updates`` updates in one ``lax.scan``.
+    """A jitted ``state -> (state, metrics)`` doing ``num_updates`` updates in one ``lax.scan``
+    (whole collections: a multiple of ``rollouts_per_collect``).
 
     Metrics are reduced over the chunk: ``episodes`` and ``return_sum`` are sums (training
     return = return_sum / episodes), everything else is a mean over updates, except the
     non-finite check's ``nonfinite`` and ``nonfinite_update`` (:func:`nonfinite_check`).
     """
+    per = config.a2c.rollouts_per_collect
+    if num_updates % per:
+        raise ValueError(f"{num_updates} updates are not whole collections of {per}")
     update = make_update(config, env, model)
 
     def chunk(rs: RunnerState) -> tuple[RunnerState, Metrics]:
         start = rs.update
-        rs, metrics = jax.lax.scan(lambda s, _: update(s), rs, None, length=num_updates)
-        summed = ("episodes", "return_sum")
-        out = {k: v.sum(0) if k in summed else v.mean(0) for k, v in metrics.items()}
-        out.update(nonfinite_check(metrics, rs, start))
+        rs, metrics = jax.lax.scan(lambda s, _: update(s), rs, None, length=num_updates // per)
+        out = _reduce(metrics)
+        out.update(nonfinite_check(metrics, rs, start, per))
         return rs, out
 
     return jax.jit(chunk)
@@ -471,17 +654,21 @@ HEALTH_KEYS = ("nonfinite", "nonfinite_update")
 """The chunk metrics that are the check's output (not logged as training metrics)."""
 
 
-def nonfinite_check(metrics: Metrics, rs: RunnerState, start: jax.Array) -> Metrics:
+def nonfinite_check(metrics: Metrics, rs: RunnerState, start: jax.Array, per: int = 1) -> Metrics:
     """Inside the chunk: ``nonfinite`` [Q] bool, which of NONFINITE_QUANTITIES went non-finite
     (the scalars at the first update where any did; the parameters at the chunk's end), and
     ``nonfinite_update``, the number (1-based) of that first update (0 when all are finite).
-    A few reductions per chunk over per-update scalars and one over the parameters."""
+    ``metrics`` are stacked per collection of ``per`` updates (their means, so a non-finite
+    update makes its collection's mean non-finite): the number is then that collection's first
+    update. A few reductions per chunk over per-update scalars and one over the parameters."""
     bad = jnp.stack([~jnp.isfinite(metrics[k]) for k in NONFINITE_SCALARS], -1)  # [U, Q]
     any_bad = bad.any(-1)
     first = jnp.argmax(any_bad)
     params_bad = jnp.stack([~_all_finite(rs.policy_params), ~_all_finite(rs.model_params)])
     flags = jnp.concatenate([bad[first] & any_bad[first], params_bad])
-    update = jnp.where(any_bad.any(), start + first + 1, jnp.where(params_bad.any(), rs.update, 0))
+    update = jnp.where(
+        any_bad.any(), start + first * per + 1, jnp.where(params_bad.any(), rs.update, 0)
+    )
     return {"nonfinite": flags, "nonfinite_update": update.astype(jnp.int32)}
 
 

@@ -30,6 +30,12 @@ MethodName = Literal[
     "transam-im",
 ]
 SeedMode = Literal["vmap", "sequential"]
+AdvantageForm = Literal["gae", "recomputed"]
+ValueLossForm = Literal["half_squared", "squared"]
+EndBootstrap = Literal["zero", "return_mean"]
+PolicyInit = Literal["orthogonal", "torch"]
+DROPOUT_METHODS = ("transam", "transam-fuse", "transam-pool", "transam-im")
+"""Methods whose execution path can apply dropout (``a2c.act_dropout``)."""
 
 
 class ConfigError(EnvError):
@@ -59,7 +65,7 @@ class A2CConfig:
     adam_eps: float = 1e-5
     """policy Adam epsilon"""
     anneal_lr: bool = True
-    """anneal the policy learning rate linearly to 0 over the run"""
+    """anneal the policy learning rate linearly to 0 over the run (or over anneal_steps)"""
     model_lr: float = 3e-4
     """agent-model Adam learning rate (its own optimiser, never annealed)"""
     model_adam_eps: float = 1e-5
@@ -84,6 +90,35 @@ class A2CConfig:
     The reference does not, and treats the time limit as terminal: its critic cannot tell the
     last steps of an episode from the first and overestimates the future there, which biases
     every end-of-episode advantage (docs/results/README.md, "The end-of-episode critic bias")"""
+    rollouts_per_collect: int = 1
+    """rollouts collected with the same parameters before learning from them; then one update
+    per rollout, in order, each starting from the LSTM state and window acting had (reference:
+    5, a whole 25-step Spread episode as five 5-step rollouts, then five updates)"""
+    advantage: AdvantageForm = "gae"
+    """the policy-gradient advantage: the GAE advantage of acting's values ('gae'), or the
+    value target minus the critic's value recomputed in the update ('recomputed', the
+    reference: normalised return minus V)"""
+    value_loss: ValueLossForm = "half_squared"
+    """value loss per step: 0.5 (R - V)^2 (the paper) or (R - V)^2 (the reference)"""
+    end_bootstrap: EndBootstrap = "zero"
+    """what the return bootstraps from where an episode ends by its time limit: nothing
+    ('zero': the end is terminal) or the running mean of returns ('return_mean', the
+    reference: its zero bootstrap is in normalised units and is de-normalised with the
+    rest; needs normalize_returns)"""
+    anneal_steps: int = 0
+    """with anneal_lr, the steps over which the policy learning rate falls to 0 (0: the
+    run's total_steps; the reference anneals over its total_timesteps, 10M by default, also
+    when stopped earlier)"""
+    init: PolicyInit = "orthogonal"
+    """policy initialisation: orthogonal (gain sqrt 2, actor 0.01, critic 1; flax LSTM
+    defaults) or PyTorch's defaults (the reference: uniform +-1/sqrt(fan_in) everywhere, two
+    LSTM biases)"""
+    act_dropout: bool = False
+    """keep the agent model's dropout on wherever z is computed: acting, bootstrapping,
+    evaluation (the reference never switches its encoder to eval mode). TransAM family only"""
+    recompute_z: bool = False
+    """the policy loss recomputes z with the agent model's current parameters (with dropout
+    under act_dropout) instead of reusing the z acting saw (the reference recomputes)"""
 
 
 @dataclass(frozen=True)
@@ -172,6 +207,22 @@ class TrainConfig:
         _in_range("a2c.model_lr", a.model_lr, 0.0, math.inf)
         for name in ("lr", "adam_eps", "model_adam_eps", "max_grad_norm"):
             _positive(f"a2c.{name}", getattr(a, name))
+        _at_least("a2c.rollouts_per_collect", a.rollouts_per_collect, 1)
+        _at_least("a2c.anneal_steps", a.anneal_steps, 0)
+        _choice("a2c.advantage", a.advantage, ("gae", "recomputed"))
+        _choice("a2c.value_loss", a.value_loss, ("half_squared", "squared"))
+        _choice("a2c.end_bootstrap", a.end_bootstrap, ("zero", "return_mean"))
+        _choice("a2c.init", a.init, ("orthogonal", "torch"))
+        if a.end_bootstrap == "return_mean" and not a.normalize_returns:
+            raise ConfigError(
+                "a2c.end_bootstrap 'return_mean' needs a2c.normalize_returns (the running "
+                "mean it bootstraps from)"
+            )
+        if a.act_dropout and self.method not in DROPOUT_METHODS:
+            raise ConfigError(
+                f"a2c.act_dropout applies to the methods {', '.join(DROPOUT_METHODS)}; "
+                f"got method {self.method!r}"
+            )
         m = self.model
         _at_least("model.context (K)", m.context, 1)
         for name in ("width", "layers", "heads", "ff_width"):
@@ -183,7 +234,9 @@ class TrainConfig:
         if not 0.0 <= m.dropout < 1.0:
             raise ConfigError(f"model.dropout must be in [0, 1), got {m.dropout!r}")
         _choice("model.norm", m.norm, ("post", "pre"))
-        _choice("model.recon_at", m.recon_at, ("all", "last"))
+        _choice("model.recon_at", m.recon_at, ("all", "window", "last"))
+        _choice("model.init", m.init, ("default", "authors"))
+        _choice("model.action_loss", m.action_loss, ("ce", "authors"))
         _choice("model.tokens", m.tokens, ("separate", "fuse"))
         _choice("model.pool", m.pool, ("last", "mean"))
         _choice("model.decoder", m.decoder, ("reconstruct", "imitate"))
@@ -209,6 +262,17 @@ class TrainConfig:
 ADDED_SETTINGS: dict[tuple[str, str], Any] = {
     ("a2c", "time_feature"): False,
     ("a2c", "critic_z"): True,
+    ("a2c", "rollouts_per_collect"): 1,
+    ("a2c", "advantage"): "gae",
+    ("a2c", "value_loss"): "half_squared",
+    ("a2c", "end_bootstrap"): "zero",
+    ("a2c", "anneal_steps"): 0,
+    ("a2c", "init"): "orthogonal",
+    ("a2c", "act_dropout"): False,
+    ("a2c", "recompute_z"): False,
+    ("model", "embed_ln"): True,
+    ("model", "init"): "default",
+    ("model", "action_loss"): "ce",
 }
 """Settings added after runs were first written, with the value that reproduces those runs."""
 

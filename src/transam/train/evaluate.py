@@ -3,8 +3,10 @@
 Each copy plays exactly one episode (``episode_len`` steps; steps after an early termination
 are masked out). Actions are sampled from the policy by default: A2C trains a stochastic policy
 and the reference code evaluates it as it acts; ``greedy=True`` takes the argmax instead.
-Partners are drawn uniformly during training (as the training episodes draw them); the final
-evaluation (:mod:`transam.evaluation`) passes one partner index per episode instead.
+With ``a2c.act_dropout`` the agent model keeps its dropout on here too, as the reference
+evaluates. Partners are drawn uniformly during training (as the training episodes draw
+them); the final evaluation (:mod:`transam.evaluation`) passes one partner index per
+episode instead.
 
 For a model with a decoder, every step also scores ``decode(z_t, o^{-1}_t)`` against the step's
 training-only :class:`PartnerRecord`: other-agent action accuracy (argmax of the logits,
@@ -68,6 +70,7 @@ def make_episodes(
     window = model if positions and isinstance(model, TransAM) and model.decodes_positions else None
     k = window.config.context if window is not None else 1
     spec = env.spec
+    dropout = config.a2c.act_dropout
 
     def episodes(
         policy_params: Any, model_params: Any, key: jax.Array, partner: jax.Array | None = None
@@ -92,8 +95,9 @@ def make_episodes(
         def body(carry: tuple[Any, ...], key: jax.Array) -> tuple[tuple[Any, ...], Any]:
             env_state, x, pc, mc, alive, past_obs, past_act = carry
             k_act, k_env = jax.random.split(key)
+            k_drop = jax.random.fold_in(key, 1) if dropout else None  # a2c.act_dropout
             pc, mc, z, logits, _ = act(
-                policy, model, policy_params, model_params, pc, mc, x, env_state
+                policy, model, policy_params, model_params, pc, mc, x, env_state, k_drop
             )
             if greedy:
                 action = jnp.argmax(logits, -1).astype(jnp.int32)

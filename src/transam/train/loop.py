@@ -60,6 +60,7 @@ from transam.train.a2c import (
     HEALTH_KEYS,
     NONFINITE_QUANTITIES,
     RunnerState,
+    anneal_updates,
     init_runner,
     make_chunk,
     steps_per_update,
@@ -106,9 +107,11 @@ class Plan:
 
 
 def make_plan(config: TrainConfig, episode_len: int) -> Plan:
+    """Chunks of whole collections (``a2c.rollouts_per_collect`` updates each)."""
     per_update = steps_per_update(config)
-    every = round(config.eval.every_episodes * episode_len / per_update)
-    return Plan(per_update, total_updates(config), max(1, every))
+    per = config.a2c.rollouts_per_collect
+    every = round(config.eval.every_episodes * episode_len / (per_update * per)) * per
+    return Plan(per_update, total_updates(config), max(per, every))
 
 
 @dataclass
@@ -130,12 +133,17 @@ def env_and_model(config: TrainConfig) -> tuple[ControlledEnv, AgentModel]:
     return e, make_model(config.method, e.spec, config.model, config.baseline)
 
 
+def anneal_by_run(config: TrainConfig) -> bool:
+    """Whether the learning-rate schedule depends on the run length."""
+    return config.a2c.anneal_lr and not config.a2c.anneal_steps
+
+
 def _program_key(config: TrainConfig) -> TrainConfig:
     """The part of the config a compiled program depends on (not the seed or the paths; the
     run length only through the learning-rate schedule)."""
     return dataclasses.replace(
         config,
-        total_steps=config.total_steps if config.a2c.anneal_lr else 1,
+        total_steps=config.total_steps if anneal_by_run(config) else 1,
         seed=0,
         num_seeds=1,
         seed_mode="vmap",
@@ -628,5 +636,5 @@ def policy_lr(config: TrainConfig, update: int) -> float:
     a = config.a2c
     if not a.anneal_lr:
         return a.lr
-    n = total_updates(config)
+    n = anneal_updates(config)
     return a.lr * (1.0 - min(max(update, 0), n) / n)

@@ -1,0 +1,76 @@
+#!/usr/bin/env bash
+# The deviation table (issue 19, point 3): each of our departures from the authors' loop,
+# measured one at a time against the preset. Every run is `--preset authors` with ONE setting
+# put back to our default; same population, seeds, length and evaluation as parity.sh, whose
+# `authors` run is the baseline (run parity.sh first, or set BASELINE). Then the table.
+#
+#   docs/results/scripts/deviations.sh                  all rows (14 runs of 3 seeds: long)
+#   ONLY="clock critic_no_z" docs/results/scripts/deviations.sh     some rows
+#   SMOKE=1 docs/results/scripts/deviations.sh          5k steps, 2 seeds, default population
+# Re-running resumes unfinished runs and skips finished ones. Overrides as in parity.sh, plus
+# BASELINE (the preset run) and TABLE (output markdown).
+set -euo pipefail
+
+TRANSAM=${TRANSAM:-transam}
+if [[ -n "${SMOKE:-}" ]]; then
+  PARTNERS=${PARTNERS:-default}
+  OUT=${OUT:-runs/deviations-smoke}
+  STEPS=${STEPS:-5000}
+  SEEDS=${SEEDS:-2}
+  EVAL_EVERY=${EVAL_EVERY:-100}
+  EVAL_EPISODES=${EVAL_EPISODES:-20}
+  BASELINE=${BASELINE:-runs/parity-smoke/authors}
+  TABLE=${TABLE:-$OUT/deviations.md}
+else
+  PARTNERS=${PARTNERS:-runs/authors-pop}
+  OUT=${OUT:-runs/deviations}
+  STEPS=${STEPS:-625000}
+  SEEDS=${SEEDS:-3}
+  EVAL_EVERY=${EVAL_EVERY:-1000}
+  EVAL_EPISODES=${EVAL_EPISODES:-100}
+  BASELINE=${BASELINE:-runs/parity/authors}
+  TABLE=${TABLE:-docs/results/parity/deviations.md}
+fi
+HERE=$(dirname "$0")
+
+# name | flags that put one setting back to our default
+ROWS=(
+  "update_every_rollout|--a2c.rollouts-per-collect 1"
+  "gae_advantage|--a2c.advantage gae"
+  "half_value_loss|--a2c.value-loss half_squared"
+  "terminal_time_limit|--a2c.end-bootstrap zero"
+  "anneal_over_run|--a2c.anneal-steps 0"
+  "orthogonal_init|--a2c.init orthogonal"
+  "no_act_dropout|--a2c.no-act-dropout"
+  "acting_z|--a2c.no-recompute-z"
+  "critic_no_z|--a2c.no-critic-z"
+  "clock|--a2c.time-feature"
+  "token_layernorm|--model.embed-ln"
+  "flax_init|--model.init default"
+  "recon_in_rollout|--model.recon-at all"
+  "proper_action_ce|--model.action-loss ce"
+)
+
+selected() {
+  [[ -z "${ONLY:-}" ]] && return 0
+  [[ " $ONLY " == *" $1 "* ]]
+}
+
+args=()
+for row in "${ROWS[@]}"; do
+  name=${row%%|*}
+  flags=${row#*|}
+  selected "$name" || continue
+  dir="$OUT/$name"
+  resume=()
+  [[ -f "$dir/config.json" ]] && resume=(--resume)
+  echo "== $name ($flags): $dir"
+  # shellcheck disable=SC2086  # flags is a list
+  "$TRANSAM" train --env spread --method transam --preset authors --partners "$PARTNERS" \
+    --total-steps "$STEPS" --num-seeds "$SEEDS" \
+    --eval.every-episodes "$EVAL_EVERY" --eval.episodes "$EVAL_EPISODES" \
+    --out "$dir" --no-progress "${resume[@]}" $flags
+  args+=("$name ($flags)=$dir")
+done
+
+python "$HERE/deviation_table.py" --baseline "$BASELINE" --out "$TABLE" "${args[@]}"

@@ -1,0 +1,162 @@
+"""Our TransAM runs against the authors' measured learning curve on Spread.
+
+For each run directory (one seed, or ``seed_S/`` subdirectories of a multi-seed run): the
+evaluation return and the evaluation partner-action accuracy (newest window position) by
+training step, mean over seeds with a 95% t-interval, over the authors' single-seed curve
+(``curve.csv``: ``eval_return``, ``eval_action_accuracy_newest``). Writes ``parity.png`` and
+``parity.md`` (the window 400k-625k steps, where their curve levels off, and the first
+evaluation) into ``--out``.
+
+    python docs/results/scripts/parity_plot.py --out docs/results/parity \
+        "authors loop=runs/parity/authors" "our defaults=runs/parity/ours"
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262}
+"""Two-sided 95% t quantiles by degrees of freedom (1.96 beyond)."""
+
+METRICS = (
+    ("eval/return", "eval_return", "evaluation return"),
+    ("eval/action_accuracy", "eval_action_accuracy_newest", "partner-action accuracy (newest)"),
+)
+WINDOW = (400_000, 625_000)
+
+
+def seed_records(run: Path) -> list[list[dict[str, Any]]]:
+    """metrics.jsonl records of each seed of the run in ``run``."""
+    files = sorted(run.glob("seed_*/metrics.jsonl")) or [run / "metrics.jsonl"]
+    out = []
+    for f in files:
+        if f.exists():
+            lines = [json.loads(x) for x in f.read_text().splitlines() if x.strip()]
+            out.append(lines)
+    if not out:
+        raise SystemExit(f"no metrics.jsonl in {run}")
+    return out
+
+
+def mean_ci(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean over axis 0 and the half-width of its 95% t-interval (0 for one seed)."""
+    n = values.shape[0]
+    with warnings.catch_warnings():  # all-NaN columns (a window the runs did not reach)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mean = np.nanmean(values, axis=0)
+        if n < 2:
+            return mean, np.zeros_like(mean)
+        t = T975.get(n - 1, 1.96)
+        return mean, t * np.nanstd(values, axis=0, ddof=1) / math.sqrt(n)
+
+
+def by_step(seeds: list[list[dict[str, Any]]], key: str) -> tuple[np.ndarray, np.ndarray]:
+    """(steps every seed reached, values [seeds, steps])."""
+    common = sorted(set.intersection(*({r["step"] for r in s} for s in seeds)))
+    table = [{r["step"]: r.get(key) for r in s} for s in seeds]
+    values = np.array([[np.nan if t[x] is None else t[x] for x in common] for t in table])
+    return np.array(common), values
+
+
+def read_curve(path: Path) -> dict[str, np.ndarray]:
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+
+
+def window_mean(steps: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Each seed's mean over the evaluations inside WINDOW (NaN where there are none)."""
+    inside = (steps >= WINDOW[0]) & (steps <= WINDOW[1])
+    if not inside.any():
+        return np.full(values.shape[0], np.nan)
+    return np.nanmean(values[:, inside], axis=1)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("runs", nargs="+", help="LABEL=RUN_DIR")
+    parser.add_argument("--curve", type=Path, required=True, help="the authors' curve.csv")
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args()
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    curve = read_curve(args.curve)
+    runs = {}
+    for spec in args.runs:
+        label, _, path = spec.partition("=")
+        runs[label] = seed_records(Path(path))
+    args.out.mkdir(parents=True, exist_ok=True)
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    rows = []
+    for ax, (key, column, title) in zip(axes, METRICS, strict=True):
+        ax.plot(curve["controlled_steps"], curve[column], "k-", lw=1.5, label="authors (1 seed)")
+        for label, seeds in runs.items():
+            steps, values = by_step(seeds, key)
+            if not len(steps) or np.isnan(values).all():
+                continue
+            mean, ci = mean_ci(values)
+            (line,) = ax.plot(steps, mean, lw=1.5, label=f"{label} ({len(seeds)} seeds)")
+            ax.fill_between(steps, mean - ci, mean + ci, color=line.get_color(), alpha=0.2)
+        ax.set_title(title)
+        ax.set_xlabel("controlled-agent steps")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle("TransAM on Spread: ours (mean, 95% CI over seeds) vs the authors' loop")
+    fig.tight_layout()
+    fig.savefig(args.out / "parity.png", dpi=120)
+
+    c_steps = curve["controlled_steps"]
+    for label, seeds in [("authors (curve.csv)", None), *runs.items()]:
+        row = [label, "1" if seeds is None else str(len(seeds))]
+        for key, column, _ in METRICS:
+            if seeds is None:
+                first, win = curve[column][0], window_mean(c_steps, curve[column][None])
+                row += [f"{first:.3g}", f"{win[0]:.3g}"]
+                continue
+            steps, values = by_step(seeds, key)
+            if not len(steps):
+                row += ["-", "-"]
+                continue
+            f_mean, f_ci = mean_ci(values[:, :1])
+            w_mean, w_ci = mean_ci(window_mean(steps, values)[:, None])
+            row += [_pm(f_mean[0], f_ci[0]), _pm(w_mean[0], w_ci[0])]
+        rows.append(row)
+    head = [
+        "run",
+        "seeds",
+        "return, first eval",
+        "return, 400k-625k",
+        "accuracy, first eval",
+        "accuracy, 400k-625k",
+    ]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    note = (
+        "\n\nMean over seeds ± 95% t-interval; '400k-625k' is each seed's mean over its "
+        "evaluations in that window (nan: the runs did not reach it). Figure: parity.png.\n"
+    )
+    (args.out / "parity.md").write_text("\n".join(lines) + note)
+    print("\n".join(lines))
+    print(f"wrote {args.out / 'parity.png'} and {args.out / 'parity.md'}")
+
+
+def _pm(mean: float, ci: float) -> str:
+    if math.isnan(mean):
+        return "nan"
+    return f"{mean:.3g} ± {ci:.2g}" if ci else f"{mean:.3g}"
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,182 @@
+"""Named sets of settings: ``transam train --preset NAME`` starts from them, and any other flag
+still overrides a single setting (``--preset authors --a2c.time-feature`` is the authors' loop
+with our clock), so each deviation can be measured on its own.
+
+``authors``: the first author's TransAM training loop on Spread as their public script runs it
+(conor-wallace/agent-transformer @ 62f58f7, ``a2c_lstm_transformer_spread.py`` with the
+``opponent_models.BERTRAOOpponentTransformer`` it builds), setting by setting. Each entry
+names where in that script the value comes from. The preset does not choose the partner
+population or the run length: the parity runs pass the authors' population (``--partners``)
+and ``--total-steps``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from transam.train.config import ConfigError, TrainConfig
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One preset value: the setting (``group.name``, or ``name`` at the top), its value, and
+    where the reference has it."""
+
+    name: str
+    value: Any
+    source: str
+
+
+AUTHORS: tuple[Setting, ...] = (
+    # --- the update scheme
+    Setting("a2c.num_envs", 10, "Args.num_envs = 10"),
+    Setting("a2c.n_steps", 5, "Args.episode_length // Args.num_minibatches = 25 // 5 (batch_size)"),
+    Setting(
+        "a2c.rollouts_per_collect",
+        5,
+        "the loop over idx in range(num_minibatches) collects a whole 25-step episode as 5 "
+        "chunks of 5 steps with the same parameters (LSTM state and transformer window carried "
+        "across chunks, reset at the episode start), then 'for idx in range(num_minibatches)' "
+        "does one optimiser step per chunk, in order, from the LSTM state stored at its start",
+    ),
+    # --- returns, advantages, losses
+    Setting("a2c.gamma", 0.99, "Args.gamma"),
+    Setting("a2c.gae_lambda", 0.95, "Args.gae_lambda"),
+    Setting(
+        "a2c.normalize_returns",
+        True,
+        "RunningMeanStd over the GAE returns, updated chunk by chunk; returns standardised",
+    ),
+    Setting(
+        "a2c.end_bootstrap",
+        "return_mean",
+        "at the episode end next_value = 0 is set before 'values * sqrt(var) + mean' "
+        "de-normalises the row, and dones stored per step are never 1: the last step "
+        "bootstraps from the running mean of returns",
+    ),
+    Setting(
+        "a2c.advantage",
+        "recomputed",
+        "mb_advantages = mb_returns - new_values.detach(): normalised return minus the value "
+        "recomputed in the update",
+    ),
+    Setting("a2c.normalize_advantages", False, "Args.norm_adv is never used"),
+    Setting("a2c.value_loss", "squared", "value_loss = (mb_returns - new_values).pow(2).mean()"),
+    Setting("a2c.vf_coef", 1.0, "Args.vf_coef"),
+    Setting("a2c.ent_coef", 0.01, "Args.ent_coef"),
+    # --- optimisers
+    Setting("a2c.lr", 3e-4, "Args.learning_rate, Adam"),
+    Setting("a2c.adam_eps", 1e-5, "optim.Adam(agent.parameters(), eps=1e-5)"),
+    Setting("a2c.anneal_lr", True, "Args.anneal_lr"),
+    Setting(
+        "a2c.anneal_steps",
+        10_000_000,
+        "frac = 1 - (iteration - 1) / num_iterations with num_iterations from "
+        "Args.total_timesteps = 10M (the measured curve was stopped at 625k/2M of a 10M run)",
+    ),
+    Setting("a2c.model_lr", 3e-4, "Args.opponent_learning_rate, never annealed"),
+    Setting("a2c.model_adam_eps", 1e-5, "optim.Adam(opponent_model.parameters(), eps=1e-5)"),
+    Setting("a2c.max_grad_norm", 0.25, "Args.max_grad_norm, clip_grad_norm_ on each network"),
+    # --- the policy
+    Setting("a2c.hidden", 128, "Agent: nn.LSTM(obs + 128, 128), fc1 128"),
+    Setting(
+        "a2c.critic_z",
+        True,
+        "Agent: actor and critic heads on one LSTM + fc1 trunk that reads concat(o, E^o)",
+    ),
+    Setting("a2c.time_feature", False, "Agent input: concat(o_t, E^o_t), no clock"),
+    Setting(
+        "a2c.init",
+        "torch",
+        "Agent's layers keep PyTorch's default init (layer_init is defined but never called)",
+    ),
+    Setting("a2c.backprop_encoder", False, "mb_embeddings = ...[:, :, -1].detach()"),
+    Setting(
+        "a2c.act_dropout",
+        True,
+        "opponent_model is never put in eval mode: dropout while acting, bootstrapping, "
+        "in the update and in evaluate()",
+    ),
+    Setting(
+        "a2c.recompute_z",
+        True,
+        "the update runs opponent_model on the stored windows again and feeds those "
+        "embeddings (detached) to agent.evaluate",
+    ),
+    # --- the agent model
+    Setting("model.context", 5, "Args.seq_length = 5"),
+    Setting("model.width", 128, "hidden_dim=128"),
+    Setting("model.layers", 4, "n_layer=4"),
+    Setting("model.heads", 4, "n_head=4"),
+    Setting("model.ff_width", 256, "n_inner=2*128"),
+    Setting("model.dropout", 0.1, "resid_pdrop=0.1, attn_pdrop=0.1"),
+    Setting("model.norm", "post", "BertModel (post-norm)"),
+    Setting("model.causal", False, "BertModel: bidirectional attention"),
+    Setting("model.tokens", "separate", "BERTRAO: (return, action, state) tokens per step"),
+    Setting("model.pool", "last", "embeddings[:, -1]: the newest observation token's output"),
+    Setting("model.decoder", "reconstruct", "predict_oppnt_states and predict_oppnt_actions"),
+    Setting(
+        "model.embed_ln",
+        False,
+        "BERTRAOOpponentTransformer.forward never applies self.embed_ln, and their BertModel "
+        "has no embeddings module: the summed token embeddings go straight into the blocks",
+    ),
+    Setting(
+        "model.init",
+        "authors",
+        "BertModel.init_weights: N(0, 0.02) Linear weights, zero biases in the blocks; "
+        "embed_* and the heads are PyTorch Linear defaults, embed_timestep nn.Embedding N(0, 1)",
+    ),
+    Setting(
+        "model.recon_at",
+        "window",
+        "losses over every position with mask > 0 of every stored window, including steps "
+        "of the episode's earlier chunks (their targets are in opp_obs_seqs/opp_actions_seqs)",
+    ),
+    Setting(
+        "model.action_loss",
+        "authors",
+        "F.cross_entropy(opp_actions_preds, mb_opp_actions_seq) on softmax outputs shaped "
+        "(batch, 2 partners, 5 actions): a cross-entropy over the partner axis",
+    ),
+    # --- evaluation
+    Setting(
+        "eval.every_episodes",
+        1000,
+        "evaluate when episodes_passed % 100 == 0, counted per iteration of 10 parallel "
+        "episodes: every 1000 episodes (25,000 steps)",
+    ),
+    Setting("eval.episodes", 100, "Args.num_eval_envs = 100, one episode each"),
+    Setting("eval.greedy", False, "evaluate(): actions sampled (OneHotCategorical)"),
+)
+"""The authors' training loop (see the module docstring)."""
+
+PRESETS: dict[str, tuple[Setting, ...]] = {"authors": AUTHORS}
+PRESET_NAMES: tuple[str, ...] = ("none", *PRESETS)
+
+
+def apply(config: TrainConfig, preset: str) -> TrainConfig:
+    """``config`` with every setting of ``preset`` ('none': unchanged)."""
+    if preset == "none":
+        return config
+    if preset not in PRESETS:
+        raise ConfigError(f"unknown preset {preset!r}; valid choices: {', '.join(PRESET_NAMES)}")
+    for s in PRESETS[preset]:
+        config = _set(config, s.name, s.value)
+    return config
+
+
+def _set(config: Any, name: str, value: Any) -> Any:
+    head, _, rest = name.partition(".")
+    if not rest:
+        return dataclasses.replace(config, **{head: value})
+    return dataclasses.replace(config, **{head: _set(getattr(config, head), rest, value)})
+
+
+def get(config: Any, name: str) -> Any:
+    """The value of setting ``name`` (``group.name``) in ``config``."""
+    for part in name.split("."):
+        config = getattr(config, part)
+    return config
