@@ -21,7 +21,7 @@ from parity_plot import WINDOW, by_step, mean_ci, seed_records
 
 KEYS = (
     ("eval/return", "return"),
-    ("eval/action_accuracy", "accuracy"),
+    ("eval/action_accuracy_newest", "accuracy"),
     ("train/entropy", "entropy"),
 )
 

@@ -28,7 +28,11 @@ T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8
 
 METRICS = (
     ("eval/return", "eval_return", "evaluation return"),
-    ("eval/action_accuracy", "eval_action_accuracy_newest", "partner-action accuracy (newest)"),
+    (
+        "eval/action_accuracy_newest",
+        "eval_action_accuracy_newest",
+        "partner-action accuracy (newest)",
+    ),
 )
 WINDOW = (400_000, 625_000)
 
