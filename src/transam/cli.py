@@ -111,10 +111,15 @@ class EnvsBench:
         console.print(table)
 
 
+CONTROLLED_AGENTS: dict[str, tuple[str, ...]] = {"landmark": ("spread",)}
+"""Scripted controlled agents of ``envs rollout --agent`` (besides ``random``), and the
+environments each one plays."""
+
+
 @dataclass
 class EnvsRollout:
-    """Roll out every environment with its partner population and a random controlled agent,
-    and print each partner team's episode returns."""
+    """Roll out every environment with its partner population and a random controlled agent
+    (or a scripted one, ``--agent``), and print each partner team's episode returns."""
 
     envs: tuple[EnvName, ...] = ALL_ENVS
     """environments to roll out"""
@@ -126,6 +131,9 @@ class EnvsRollout:
     """PRNG seed"""
     partners: PartnerChoice = "default"
     """partner population: the shipped learned one, its held-out split, or the scripted one"""
+    agent: Literal["random", "landmark"] = "random"
+    """controlled agent: uniformly random, or ``landmark`` (Spread only: head for the landmark
+    whose nearest partner is farthest away, transam.partners.spread.landmark_agent)"""
 
     def run(self) -> None:
         import jax
@@ -135,14 +143,26 @@ class EnvsRollout:
         from transam.envs.rollout import episode_stats, make_random_rollout
 
         _check_positive(episodes=self.episodes, num_envs=self.num_envs)
-        summary = Table(title="random controlled agent: return (worst/best = team means)")
+        policy = None
+        if self.agent != "random":
+            wrong = [e for e in self.envs if e not in CONTROLLED_AGENTS[self.agent]]
+            if wrong:
+                raise SystemExit(
+                    f"error: --agent {self.agent} plays only "
+                    f"{', '.join(CONTROLLED_AGENTS[self.agent])}; got --envs {' '.join(self.envs)}"
+                )
+            from transam.partners.spread import landmark_agent
+
+            policy = landmark_agent
+        summary = Table(title=f"{self.agent} controlled agent: return (worst/best = team means)")
         for col in ("env", "teams", "eps", "return", "std", "worst", "best", "secs"):
             summary.add_column(col, justify="right", no_wrap=True)
         for name in self.envs:
             start = time.perf_counter()
             env = make_env(name, partners=self.partners)
             steps = self.episodes * env.spec.episode_len
-            _, ts = make_random_rollout(env, self.num_envs, steps)(jax.random.key(self.seed))
+            rollout = make_random_rollout(env, self.num_envs, steps, policy)
+            _, ts = rollout(jax.random.key(self.seed))
             stats = episode_stats(ts)
             per_team = stats.by_partner(env.num_partners)
             table = Table(title=f"{name}: {env.population.name} population")

@@ -1,4 +1,5 @@
-"""Jitted rollouts of a controlled-agent environment with a uniformly random controlled agent.
+"""Jitted rollouts of a controlled-agent environment with a uniformly random (or any given)
+controlled agent.
 
 Used by the demo, the environment benchmark and the tests: one ``lax.scan`` over time of a
 ``vmap`` over environments, so no Python runs per environment step.
@@ -14,12 +15,18 @@ import jax.numpy as jnp
 import numpy as np
 
 from transam.envs.core import ControlledEnv, EnvState, Timestep
+from transam.envs.population import PolicyFn
 
 Rollout = Callable[[jax.Array], tuple[EnvState, Timestep]]
 
 
-def make_random_rollout(env: ControlledEnv, num_envs: int, num_steps: int) -> Rollout:
-    """A jitted ``key -> (final states, timesteps [num_steps, num_envs])`` function."""
+def make_random_rollout(
+    env: ControlledEnv, num_envs: int, num_steps: int, agent: PolicyFn | None = None
+) -> Rollout:
+    """A jitted ``key -> (final states, timesteps [num_steps, num_envs])`` function.
+
+    The controlled agent acts uniformly at random, or by ``agent(key, obs)`` on its own
+    observation when given (e.g. :func:`transam.partners.spread.landmark_agent`)."""
     n_act = env.spec.num_actions
 
     def run(key: jax.Array) -> tuple[EnvState, Timestep]:
@@ -28,7 +35,11 @@ def make_random_rollout(env: ControlledEnv, num_envs: int, num_steps: int) -> Ro
 
         def one_step(states: EnvState, key: jax.Array) -> tuple[EnvState, Timestep]:
             key_act, key_env = jax.random.split(key)
-            actions = jax.random.randint(key_act, (num_envs,), 0, n_act, dtype=jnp.int32)
+            if agent is None:
+                actions = jax.random.randint(key_act, (num_envs,), 0, n_act, dtype=jnp.int32)
+            else:
+                keys = jax.random.split(key_act, num_envs)
+                actions = jax.vmap(agent)(keys, states.obs).astype(jnp.int32)
             return jax.vmap(env.step)(jax.random.split(key_env, num_envs), states, actions)
 
         return jax.lax.scan(one_step, states, jax.random.split(key_run, num_steps))
