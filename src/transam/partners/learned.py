@@ -117,7 +117,8 @@ def train_recipe(recipe: Recipe, log: Any = print) -> tuple[dict[str, np.ndarray
     members: list[dict[str, Any]] = []
     random_returns: dict[str, list[float]] = {}
     checkpoint_returns: dict[str, list[list[float]]] = {}
-    acting: dict[str, tuple[PolicyFn, int]] = {}  # member -> (act as shipped, trained agent)
+    agent_pick: dict[str, dict[str, list]] = {}
+    acting: dict[str, tuple[PolicyFn, int]] = {}  # member -> (act as shipped, its slot)
     for fam in recipe.families:
         runs = [r for r in recipe.runs if r.family == fam.name]
         if not runs:
@@ -160,15 +161,28 @@ def train_recipe(recipe: Recipe, log: Any = print) -> tuple[dict[str, np.ndarray
         for i, run in enumerate(runs):
             run_p = jax.tree.map(lambda x, i=i: x[i], params)  # [K, A, ...]
             curve = [[round(float(x), 4) for x in row] for row in np.asarray(curve_fn(run_p))]
+            label = f"{fam.name}/seed{run.seed}"
             if fam.ppo.checkpoints > 1:  # the learning curve, played as the members play
-                checkpoint_returns[f"{fam.name}/seed{run.seed}"] = curve
-            for name, ck, agent in run.members:
+                checkpoint_returns[label] = curve
+            run_members = run.members
+            if run.pick:  # the best agents of the run, in index order (recipes._spread)
+                from transam.partners.spread import agent_ranks
+
+                ck = run.members[0][1]
+                ranks = agent_ranks(view, team(jax.tree.map(lambda x, c=ck: x[c], run_p)))
+                best = sorted(
+                    sorted(range(view.num_agents), key=lambda a: -ranks[a])[: len(run_members)]
+                )
+                run_members = tuple((n, c, best[k]) for k, (n, c, _) in enumerate(run_members))
+                agent_pick[label] = {"ranks": ranks, "agents": best}
+                log(f"{recipe.env}/{recipe.split} {label}: agents {best} (ranks {ranks})")
+            for slot, (name, ck, agent) in enumerate(run_members):
                 p = jax.tree.map(lambda x, c=ck, a=agent: np.asarray(x[c, a]), run_p)
                 for path, arr in flatten_dict(p, sep="/").items():
                     tensors[f"{name}/{path}"] = np.ascontiguousarray(arr, np.float32)
-                acting[name] = (
+                acting[name] = (  # Spread: the k-th member of a run plays partner slot k
                     make_policy(p, recipe.env, view.num_actions, fam.ppo.hidden, fam.act),
-                    agent,
+                    slot,
                 )
                 steps = fam.ppo.num_updates * fam.ppo.num_envs * fam.ppo.rollout_len
                 members.append(
@@ -199,6 +213,8 @@ def train_recipe(recipe: Recipe, log: Any = print) -> tuple[dict[str, np.ndarray
     }
     if checkpoint_returns:
         entry["checkpoint_returns"] = checkpoint_returns
+    if agent_pick:
+        entry["agent_pick"] = agent_pick
     if recipe.env == "spread":
         from transam.partners.spread import member_scores
 

@@ -47,6 +47,7 @@ class Run:
     members: tuple[tuple[str, int, int], ...]
     shaping: tuple[tuple[float, float, float], ...] | None = None  # per agent (Overcooked)
     shaping_label: str = "none"
+    pick: bool = False  # Spread: members' agents chosen after training (learned.train_recipe)
 
 
 @dataclass(frozen=True)
@@ -148,7 +149,16 @@ def _spread(split: str) -> Recipe:
     with their five heuristics (:func:`spread_teams`).
 
     The held-out split: other seeds, and the heuristics rotated by one place (second, third,
-    farthest, closest, first), so each heuristic meets other learned partners."""
+    farthest, closest, first), so each heuristic meets other learned partners.
+
+    Why ``pick``: self-play with one net per agent often leaves one agent *lazy*: it learns to
+    run off in a fixed direction (out of the way, no collisions) while the other two cover two
+    landmarks. Its team still scores well (-51 against random play's -71), but as a partner it
+    is useless (greedy: a random controlled agent does worse beside it than beside a random
+    partner). Three of the first four runs had agent 1 so. Each run therefore ships the two of
+    its three agents beside which a random controlled agent does best (two copies of the agent
+    as partners, played greedily), in index order; the manifest's ``agent_pick`` has the
+    numbers, each member's ``agent`` the one taken."""
     seed = 0 if split == "default" else 100
     ppo = SPREAD_PPO
     fams = (
@@ -157,7 +167,13 @@ def _spread(split: str) -> Recipe:
     )
     last = ppo.checkpoints - 1
     runs = tuple(
-        Run(algo, seed + 2 * i + j, 0.99, tuple((f"{algo}_{2 * j + a}", last, a) for a in (0, 1)))
+        Run(
+            algo,
+            seed + 2 * i + j,
+            0.99,
+            tuple((f"{algo}_{2 * j + a}", last, a) for a in (0, 1)),
+            pick=True,
+        )
         for i, algo in enumerate(("ippo", "mappo"))
         for j in (0, 1)
     )

@@ -150,7 +150,7 @@ def member_scores(
 ) -> tuple[dict[str, dict[str, Any]], dict[str, float]]:
     """How competent each learned member is, played as it will act (one jitted program).
 
-    ``members``: name -> (act function, the agent index it was trained as: its partner slot).
+    ``members``: name -> (act function, the partner slot it plays in the teams, 0 or 1).
     Per member:
 
     * ``copies_return``: three copies of the member (its own reward, mean over the agents);
@@ -174,11 +174,11 @@ def member_scores(
         index[key] = len(combos)
         combos.append(slots)
 
-    for i, (name, (_, agent)) in enumerate(members.items()):
+    for i, (name, (_, slot_of)) in enumerate(members.items()):
         add((name, "copies"), (i, i, i))
         for other in ("self", *AUTHORS_HEURISTICS, "random"):
             j = i if other == "self" else names.index(other)
-            pair = (i, j) if agent == 0 else (j, i)
+            pair = (i, j) if slot_of == 0 else (j, i)
             add((name, other), (*pair, rnd))
     add(("baseline", "random"), (rnd, rnd, rnd))
     for h in AUTHORS_HEURISTICS:
@@ -213,6 +213,21 @@ def member_scores(
         for other in ("random", *AUTHORS_HEURISTICS)
     }
     return out, baseline
+
+
+def agent_ranks(
+    view: JointView, policies: list[PolicyFn], episodes: int = 128, seed: int = 1
+) -> list[float]:
+    """Per agent of a trained run: a uniformly random controlled agent's return when two copies
+    of that agent are its partners (how useful the agent is as a partner; a lazy agent that
+    runs away scores below random partners)."""
+
+    def score(i: jax.Array) -> jax.Array:
+        agent = lambda k, o: jax.lax.switch(i, policies, k, o)
+        return play(view, [agent, agent, _random_act], jax.random.PRNGKey(seed), episodes)[0]
+
+    found = jax.jit(jax.vmap(score))(jnp.arange(len(policies)))
+    return [round(float(x), 4) for x in np.asarray(found)[:, CONTROLLED]]
 
 
 def _random_act(key: jax.Array, obs: jax.Array) -> jax.Array:
