@@ -2,8 +2,10 @@
 
 Layout: ``transam/partners/data/<env>/manifest.json`` holds, per split (``default`` and
 ``heldout``), the member table (name, kind, recipe, seed, shaping, gamma, steps, agent,
-checkpoint, self-play return) and the teams; ``<split>.safetensors`` holds each member's actor
-as ``<member>/<param path>`` tensors. Loading reads these files only: no network, no training.
+checkpoint, action selection ``act``, self-play return played that way; Spread also each
+member's scores of :func:`transam.partners.spread.member_scores`) and the teams;
+``<split>.safetensors`` holds each member's actor as ``<member>/<param path>`` tensors.
+Loading reads these files only: no network, no training.
 """
 
 from __future__ import annotations

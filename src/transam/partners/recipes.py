@@ -145,7 +145,8 @@ def spread_teams(heuristics: tuple[str, ...]) -> tuple[tuple[str, tuple[str, ...
 def _spread(split: str) -> Recipe:
     """The authors' population structure on our trainer: eight greedy (``act: argmax``, as
     their actors) MLP actors, ``ippo_0-3`` from two IPPO self-play runs and ``mappo_0-3`` from
-    two MAPPO runs (agents 0 and 1 of each run, final checkpoint), in the authors' 13-team table
+    two MAPPO runs (two of the three agents of each run, see ``pick``; final checkpoint of
+    1.2M steps), in the authors' 13-team table
     with their five heuristics (:func:`spread_teams`).
 
     The held-out split: other seeds, and the heuristics rotated by one place (second, third,
@@ -155,10 +156,10 @@ def _spread(split: str) -> Recipe:
     run off in a fixed direction (out of the way, no collisions) while the other two cover two
     landmarks. Its team still scores well (-51 against random play's -71), but as a partner it
     is useless (greedy: a random controlled agent does worse beside it than beside a random
-    partner). Three of the first four runs had agent 1 so. Each run therefore ships the two of
-    its three agents beside which a random controlled agent does best (two copies of the agent
-    as partners, played greedily), in index order; the manifest's ``agent_pick`` has the
-    numbers, each member's ``agent`` the one taken."""
+    partner). Every one of the eight runs of both splits had one such agent (agent 1 or 2).
+    Each run therefore ships the two of its three agents beside which a random controlled agent
+    does best (two copies of the agent as partners, played greedily), in index order; the
+    manifest's ``agent_pick`` has the numbers, each member's ``agent`` the one taken."""
     seed = 0 if split == "default" else 100
     ppo = SPREAD_PPO
     fams = (
