@@ -33,6 +33,15 @@ def test_envs_rollout_prints_per_team_returns(capsys: pytest.CaptureFixture[str]
     assert "lbf-heldout population" in capsys.readouterr().out
 
 
+def test_envs_rollout_plays_spreads_landmark_agent(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--agent landmark`` (Spread only) replaces the random controlled agent."""
+    main(["envs", "rollout", "--envs", "spread", "--agent", "landmark", "--episodes", "1"])
+    out = capsys.readouterr().out
+    assert "landmark controlled agent" in out and "spread-default population" in out
+    with pytest.raises(SystemExit, match="--agent landmark is a Spread rule; pass --envs spread"):
+        main(["envs", "rollout", "--envs", "tag", "--agent", "landmark"])
+
+
 def test_bad_values_are_rejected_with_the_valid_choices(
     capsys: pytest.CaptureFixture[str],
 ) -> None:

@@ -2,8 +2,10 @@
 
 Layout: ``transam/partners/data/<env>/manifest.json`` holds, per split (``default`` and
 ``heldout``), the member table (name, kind, recipe, seed, shaping, gamma, steps, agent,
-checkpoint, self-play return) and the teams; ``<split>.safetensors`` holds each member's actor
-as ``<member>/<param path>`` tensors. Loading reads these files only: no network, no training.
+checkpoint, action selection ``act``, self-play return played that way; Spread also each
+member's scores of :func:`transam.partners.spread.member_scores`) and the teams;
+``<split>.safetensors`` holds each member's actor as ``<member>/<param path>`` tensors.
+Loading reads these files only: no network, no training.
 
 An imported split (Tag's default: LIAM's predators, :mod:`transam.partners.liam`) has a
 ``source`` entry (repository, commit, licence) instead of training metadata; its members name
@@ -55,6 +57,7 @@ SPLITS = ("default", "heldout")
 EVAL_EPISODES = 32
 DIR_SPLIT = "default"
 """The split a population directory holds (``manifest.json``'s entry, ``default.safetensors``)."""
+SCORE_EPISODES = 128  # Spread: per number of spread.member_scores
 
 
 def data_dir(env: str) -> Path:
@@ -151,6 +154,9 @@ def train_recipe(recipe: Recipe, log: Any = print) -> tuple[dict[str, np.ndarray
     tensors: dict[str, np.ndarray] = {}
     members: list[dict[str, Any]] = []
     random_returns: dict[str, list[float]] = {}
+    checkpoint_returns: dict[str, list[list[float]]] = {}
+    agent_pick: dict[str, dict[str, list]] = {}
+    acting: dict[str, tuple[PolicyFn, int]] = {}  # member -> (act as shipped, its slot)
     for fam in recipe.families:
         runs = [r for r in recipe.runs if r.family == fam.name]
         if not runs:
@@ -168,24 +174,54 @@ def train_recipe(recipe: Recipe, log: Any = print) -> tuple[dict[str, np.ndarray
         log(f"{recipe.env}/{recipe.split} {fam.name}: {len(runs)} run(s) in {secs:.1f}s")
         rnd = evaluate(view, [random_policy(view.num_actions)] * view.num_agents)
         random_returns[fam.stand_in] = [round(float(x), 4) for x in rnd]
+
+        def team(p: Any, fam: Any = fam, view: JointView = view) -> list[PolicyFn]:
+            """The run's learners at one checkpoint, acting as the family's members do."""
+            return [
+                make_policy(
+                    jax.tree.map(lambda leaf, a=a: leaf[a], p),
+                    recipe.env,
+                    view.num_actions,
+                    fam.ppo.hidden,
+                    fam.act,
+                )
+                for a in range(view.num_agents)
+            ]
+
+        # Every checkpoint of a run in one program (one compilation per family): [K, A] scores.
+        curve_fn = jax.jit(
+            jax.vmap(
+                lambda p, team=team, view=view: play(
+                    view, team(p), jax.random.PRNGKey(0), EVAL_EPISODES
+                )[0]
+            )
+        )
         for i, run in enumerate(runs):
             run_p = jax.tree.map(lambda x, i=i: x[i], params)  # [K, A, ...]
-            scores: dict[int, list[float]] = {}
-            for name, ck, agent in run.members:
-                if ck not in scores:
-                    pol = [
-                        make_policy(
-                            jax.tree.map(lambda x, c=ck, a=a: x[c, a], run_p),
-                            recipe.env,
-                            view.num_actions,
-                            fam.ppo.hidden,
-                        )
-                        for a in range(view.num_agents)
-                    ]
-                    scores[ck] = [round(float(x), 4) for x in evaluate(view, pol)]
+            curve = [[round(float(x), 4) for x in row] for row in np.asarray(curve_fn(run_p))]
+            label = f"{fam.name}/seed{run.seed}"
+            if fam.ppo.checkpoints > 1:  # the learning curve, played as the members play
+                checkpoint_returns[label] = curve
+            run_members = run.members
+            if run.pick:  # the best agents of the run, in index order (recipes._spread)
+                from transam.partners.spread import agent_ranks
+
+                ck = run.members[0][1]
+                ranks = agent_ranks(view, team(jax.tree.map(lambda x, c=ck: x[c], run_p)))
+                best = sorted(
+                    sorted(range(view.num_agents), key=lambda a: -ranks[a])[: len(run_members)]
+                )
+                run_members = tuple((n, c, best[k]) for k, (n, c, _) in enumerate(run_members))
+                agent_pick[label] = {"ranks": ranks, "agents": best}
+                log(f"{recipe.env}/{recipe.split} {label}: agents {best} (ranks {ranks})")
+            for slot, (name, ck, agent) in enumerate(run_members):
                 p = jax.tree.map(lambda x, c=ck, a=agent: np.asarray(x[c, a]), run_p)
                 for path, arr in flatten_dict(p, sep="/").items():
                     tensors[f"{name}/{path}"] = np.ascontiguousarray(arr, np.float32)
+                acting[name] = (  # Spread: the k-th member of a run plays partner slot k
+                    make_policy(p, recipe.env, view.num_actions, fam.ppo.hidden, fam.act),
+                    slot,
+                )
                 steps = fam.ppo.num_updates * fam.ppo.num_envs * fam.ppo.rollout_len
                 members.append(
                     {
@@ -193,6 +229,7 @@ def train_recipe(recipe: Recipe, log: Any = print) -> tuple[dict[str, np.ndarray
                         "kind": fam.ppo.algorithm,
                         "recipe": fam.name,
                         "stand_in": fam.stand_in,
+                        "act": fam.act,
                         "seed": run.seed,
                         "shaping": run.shaping_label,
                         "shaping_weights": [list(w) for w in run.shaping] if run.shaping else None,
@@ -201,17 +238,31 @@ def train_recipe(recipe: Recipe, log: Any = print) -> tuple[dict[str, np.ndarray
                         "agent": agent,
                         "checkpoint": ck,
                         "hidden": fam.ppo.hidden,
-                        "self_play_return": scores[ck][agent],
-                        "self_play_returns_all": scores[ck],
+                        "self_play_return": curve[ck][agent],
+                        "self_play_returns_all": curve[ck],
                         "train_seconds": round(secs / len(runs), 1),
                     }
                 )
-    entry = {
+    entry: dict[str, Any] = {
         "members": members,
         "teams": [{"name": n, "slots": list(s)} for n, s in recipe.teams],
         "random_return": random_returns,
         "eval_episodes": EVAL_EPISODES,
     }
+    if checkpoint_returns:
+        entry["checkpoint_returns"] = checkpoint_returns
+    if agent_pick:
+        entry["agent_pick"] = agent_pick
+    if recipe.env == "spread":
+        from transam.partners.spread import member_scores
+
+        t0 = time.time()
+        found, baseline = member_scores(joint_view("spread"), acting, SCORE_EPISODES)
+        log(f"spread/{recipe.split}: member scores in {time.time() - t0:.1f}s")
+        for m in members:
+            m.update(found[m["name"]])
+        entry["random_controlled_baseline"] = baseline
+        entry["score_episodes"] = SCORE_EPISODES
     return tensors, entry
 
 

@@ -9,9 +9,13 @@ and its held-out one is ours.
 
 Budgets are kept small (2 shared CPU cores). Overcooked and LBF: the shortest that gave
 partners clearly better than random on their own objective. Tag and Spread: about where the
-learners' returns level off (Spread's self-play returns gain under 2 points from 1.2M to 2M
-steps; Tag's MAPPO predators reach the random prey 3.5x as often at 750k steps as at 150k).
-Numbers in each manifest.
+learners' returns level off (Spread: the greedy self-play return of every run at 1/3, 2/3 and
+all of the budget is in the manifest, ``checkpoint_returns``; Tag's MAPPO predators reach the
+random prey 3.5x as often at 750k steps as at 150k). Numbers in each manifest.
+
+A family's ``act`` is how its members pick actions when they play (``"sample"`` from the
+softmax, or ``"argmax"``); it is written into each member's manifest entry, and the self-play
+returns there are measured playing that way.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ class Family:
     name: str
     ppo: PPOConfig
     stand_in: str = "self-play"  # Tag: "flee" or "random" prey
+    act: str = "sample"  # how the members play: "sample" (softmax) or "argmax" (greedy)
 
 
 @dataclass(frozen=True)
@@ -45,6 +50,7 @@ class Run:
     members: tuple[tuple[str, int, int], ...]
     shaping: tuple[tuple[float, float, float], ...] | None = None  # per agent (Overcooked)
     shaping_label: str = "none"
+    pick: bool = False  # Spread: members' agents chosen after training (learned.train_recipe)
 
 
 @dataclass(frozen=True)
@@ -107,50 +113,84 @@ def _tag(split: str) -> Recipe:
 # ------------------------------------------------------------------------------- Spread
 SPREAD_PPO = PPOConfig(total_steps=1_200_000, num_envs=32, rollout_len=25, checkpoints=3)
 
+SPREAD_HEURISTICS = (
+    "after_first_landmark",
+    "after_second_landmark",
+    "after_third_landmark",
+    "after_farthest_landmark",
+    "after_closest_landmark",
+)
+"""The authors' five rules (:data:`transam.partners.spread.AUTHORS_HEURISTICS`), in their order."""
+
+
+def spread_teams(heuristics: tuple[str, ...]) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """The authors' executed 13-team table (``pretrained_spread_opponents.py``, see
+    ``reference/authors-spread/README.md``) with our members in their places: ``heuristics``
+    fills their five heuristic places in order (first, second, third, farthest, closest there),
+    ``ippo_k`` / ``mappo_k`` fill their ``ippo_k`` / ``mappo_k``.
+
+    9 heuristic + learned teams (heuristics 0-4 in slot 0, heuristics 0-3 again in slot 1) and 4
+    learned + learned ones; no team of two heuristics. Each learned member plays the slot of the
+    agent it was trained as (even k: agent 0, odd k: agent 1), as in their table."""
+    h = heuristics
+    rows = (
+        (h[0], "ippo_1"),
+        (h[1], "mappo_1"),
+        (h[2], "ippo_3"),
+        (h[3], "mappo_3"),
+        (h[4], "ippo_1"),
+        ("ippo_0", h[0]),
+        ("mappo_0", h[1]),
+        ("ippo_2", h[2]),
+        ("mappo_2", h[3]),
+        ("ippo_0", "mappo_1"),
+        ("ippo_2", "mappo_3"),
+        ("mappo_0", "ippo_1"),
+        ("mappo_2", "ippo_3"),
+    )
+    return tuple((f"{a}+{b}", (a, b)) for a, b in rows)
+
 
 def _spread(split: str) -> Recipe:
-    """IPPO and MAPPO self-play triples, agents 0 and 1 kept at low / medium / high skill
-    (checkpoints at 1/3, 2/3 and the end), mixed with the landmark heuristics."""
+    """The authors' population structure on our trainer: eight greedy (``act: argmax``, as
+    their actors) MLP actors, ``ippo_0-3`` from two IPPO self-play runs and ``mappo_0-3`` from
+    two MAPPO runs (two of the three agents of each run, see ``pick``; final checkpoint of
+    1.2M steps), in the authors' 13-team table
+    with their five heuristics (:func:`spread_teams`).
+
+    The held-out split: other seeds, and the heuristics rotated by one place (second, third,
+    farthest, closest, first), so each heuristic meets other learned partners.
+
+    Why ``pick``: self-play with one net per agent often leaves one agent *lazy*: it learns to
+    run off in a fixed direction (out of the way, no collisions) while the other two cover two
+    landmarks. Its team still scores well (-51 against random play's -71), but as a partner it
+    is useless (greedy: a random controlled agent does worse beside it than beside a random
+    partner). Every one of the eight runs of both splits had one such agent (agent 1 or 2).
+    Each run therefore ships the two of its three agents beside which a random controlled agent
+    does best (two copies of the agent as partners, played greedily), in index order; the
+    manifest's ``agent_pick`` has the numbers, each member's ``agent`` the one taken."""
     seed = 0 if split == "default" else 100
-    fams = (Family("ippo", SPREAD_PPO), Family("mappo", replace(SPREAD_PPO, algorithm="mappo")))
-    levels = ("low", "medium", "high")
-
-    def members(algo: str) -> tuple[tuple[str, int, int], ...]:
-        return tuple((f"{algo}_{lv}_{a}", c, a) for c, lv in enumerate(levels) for a in (0, 1))
-
-    runs = (
-        Run("ippo", seed, 0.99, members("ippo")),
-        Run("mappo", seed + 1, 0.99, members("mappo")),
+    ppo = SPREAD_PPO
+    fams = (
+        Family("ippo", ppo, act="argmax"),
+        Family("mappo", replace(ppo, algorithm="mappo"), act="argmax"),
     )
-    teams: tuple[tuple[str, tuple[str, ...]], ...]
-    if split == "default":
-        teams = (
-            ("first+second", ("first", "second")),
-            ("third+first", ("third", "first")),
-            ("second+second", ("second", "second")),
-            ("closest+closest", ("closest", "closest")),
-            ("farthest+first", ("farthest", "first")),
-            ("ippo_low", ("ippo_low_0", "ippo_low_1")),
-            ("ippo_medium", ("ippo_medium_0", "ippo_medium_1")),
-            ("ippo_high", ("ippo_high_0", "ippo_high_1")),
-            ("mappo_low", ("mappo_low_0", "mappo_low_1")),
-            ("mappo_medium", ("mappo_medium_0", "mappo_medium_1")),
-            ("mappo_high", ("mappo_high_0", "mappo_high_1")),
-            ("ippo_high+mappo_low", ("ippo_high_0", "mappo_low_1")),
-            ("first+ippo_medium", ("first", "ippo_medium_1")),
+    last = ppo.checkpoints - 1
+    runs = tuple(
+        Run(
+            algo,
+            seed + 2 * i + j,
+            0.99,
+            tuple((f"{algo}_{2 * j + a}", last, a) for a in (0, 1)),
+            pick=True,
         )
-    else:
-        teams = (
-            ("second+third", ("second", "third")),
-            ("third+third", ("third", "third")),
-            ("closest+farthest", ("closest", "farthest")),
-            ("ippo_medium", ("ippo_medium_0", "ippo_medium_1")),
-            ("ippo_high", ("ippo_high_0", "ippo_high_1")),
-            ("mappo_medium", ("mappo_medium_0", "mappo_medium_1")),
-            ("mappo_high", ("mappo_high_0", "mappo_high_1")),
-            ("mappo_high+third", ("mappo_high_0", "third")),
-        )
-    return Recipe("spread", split, fams, runs, teams)
+        for i, algo in enumerate(("ippo", "mappo"))
+        for j in (0, 1)
+    )
+    heuristics = (
+        SPREAD_HEURISTICS if split == "default" else (*SPREAD_HEURISTICS[1:], SPREAD_HEURISTICS[0])
+    )
+    return Recipe("spread", split, fams, runs, spread_teams(heuristics))
 
 
 # --------------------------------------------------------------------------- Overcooked

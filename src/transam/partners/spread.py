@@ -38,11 +38,15 @@ landmark whose nearest partner is farthest away, steering as the authors' heuris
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from transam.envs.joint import JointView, play
 from transam.envs.population import Member, PolicyFn, Population, Team
-from transam.envs.spread import LANDMARKS, NUM_LANDMARKS, OTHERS, VEL, Config
+from transam.envs.spread import CONTROLLED, LANDMARKS, NUM_LANDMARKS, OTHERS, VEL, Config
 from transam.partners.moves import move_toward
 
 LEAD = 0.2  # seconds of own velocity subtracted from the target offset (damps overshoot)
@@ -139,3 +143,93 @@ def heuristic_population(config: Config | None = None) -> Population:
     teams = [Team(f"{a}+{b}", (a, b)) for a, b in DEFAULT_TEAMS]
     members = [Member(name, fn) for name, fn in HEURISTICS.items()]
     return Population("spread-heuristic", members, teams)
+
+
+def member_scores(
+    view: JointView, members: dict[str, tuple[PolicyFn, int]], episodes: int = 128, seed: int = 1
+) -> tuple[dict[str, dict[str, Any]], dict[str, float]]:
+    """How competent each learned member is, played as it will act (one jitted program).
+
+    ``members``: name -> (act function, the partner slot it plays in the teams, 0 or 1).
+    Per member:
+
+    * ``copies_return``: three copies of the member (its own reward, mean over the agents);
+    * ``random_controlled_return``: the return of a uniformly random controlled agent when the
+      partners are the member (in its slot) and X in the other, for X = the member itself
+      (``self``), each of the authors' heuristics, and a random agent;
+    * ``action_freq`` (no-op, -x, +x, -y, +y) and ``reversal_rate`` (share of steps that undo
+      the previous move, e.g. -x after +x) of the member among its copies: a greedy actor that
+      stands still has a large no-op share, one that oscillates a large reversal rate.
+
+    And ``baseline``: the random controlled agent's return with random partners (``random``)
+    and with each heuristic beside a random partner, the numbers the member's row beats.
+    """
+    names = [*members, *AUTHORS_HEURISTICS, "random"]
+    pols = [*(f for f, _ in members.values()), *AUTHORS_HEURISTICS.values(), _random_act]
+    rnd = len(names) - 1
+    combos: list[tuple[int, int, int]] = []
+    index: dict[tuple[str, str], int] = {}
+
+    def add(key: tuple[str, str], slots: tuple[int, int, int]) -> None:
+        index[key] = len(combos)
+        combos.append(slots)
+
+    for i, (name, (_, slot_of)) in enumerate(members.items()):
+        add((name, "copies"), (i, i, i))
+        for other in ("self", *AUTHORS_HEURISTICS, "random"):
+            j = i if other == "self" else names.index(other)
+            pair = (i, j) if slot_of == 0 else (j, i)
+            add((name, other), (*pair, rnd))
+    add(("baseline", "random"), (rnd, rnd, rnd))
+    for h in AUTHORS_HEURISTICS:
+        add(("baseline", h), (names.index(h), rnd, rnd))
+
+    def score(slots: jax.Array) -> tuple[jax.Array, jax.Array]:
+        def slot(j: int) -> PolicyFn:
+            return lambda k, o: jax.lax.switch(slots[j], pols, k, o)
+
+        mean, _, acts = play(view, [slot(0), slot(1), slot(2)], jax.random.PRNGKey(seed), episodes)
+        return mean, acts[..., 0]  # [A], [E, T] (slot 0's actions)
+
+    means, acts = jax.jit(jax.vmap(score))(jnp.asarray(combos, jnp.int32))
+    means, acts = np.asarray(means), np.asarray(acts)
+    out: dict[str, dict[str, Any]] = {}
+    for name in members:
+        c = index[(name, "copies")]
+        a = acts[c]
+        prev, cur = a[:, :-1], a[:, 1:]
+        undo = (prev > 0) & (cur > 0) & (cur != prev) & ((cur - 1) // 2 == (prev - 1) // 2)
+        out[name] = {
+            "copies_return": round(float(means[c].mean()), 4),
+            "random_controlled_return": {
+                other: round(float(means[index[(name, other)]][CONTROLLED]), 4)
+                for other in ("self", *AUTHORS_HEURISTICS, "random")
+            },
+            "action_freq": [round(float(np.mean(a == k)), 3) for k in range(5)],
+            "reversal_rate": round(float(undo.mean()), 3),
+        }
+    baseline = {
+        other: round(float(means[index[("baseline", other)]][CONTROLLED]), 4)
+        for other in ("random", *AUTHORS_HEURISTICS)
+    }
+    return out, baseline
+
+
+def agent_ranks(
+    view: JointView, policies: list[PolicyFn], episodes: int = 128, seed: int = 1
+) -> list[float]:
+    """Per agent of a trained run: a uniformly random controlled agent's return when two copies
+    of that agent are its partners (how useful the agent is as a partner; a lazy agent that
+    runs away scores below random partners)."""
+
+    def score(i: jax.Array) -> jax.Array:
+        agent = lambda k, o: jax.lax.switch(i, policies, k, o)
+        return play(view, [agent, agent, _random_act], jax.random.PRNGKey(seed), episodes)[0]
+
+    found = jax.jit(jax.vmap(score))(jnp.arange(len(policies)))
+    return [round(float(x), 4) for x in np.asarray(found)[:, CONTROLLED]]
+
+
+def _random_act(key: jax.Array, obs: jax.Array) -> jax.Array:
+    del obs
+    return jax.random.randint(key, (), 0, 5, dtype=jnp.int32)
