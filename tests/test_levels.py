@@ -82,6 +82,12 @@ def test_memoryless_level_of_constructed_populations() -> None:
     got = memoryless_accuracy(steps, 5, cfg)
     assert got["accuracy"] > 0.95
     assert got["majority"] < 0.85  # the rule is not one constant action
+    # The controlled agent's view holds the partners' positions relative to its own absolute
+    # one, so the same rule is readable from it too (a sum of two inputs).
+    own = memoryless_accuracy(steps, 5, cfg, view="own")
+    assert own["accuracy"] > 0.85 and own["majority"] == got["majority"]
+    with pytest.raises(ValueError, match="unknown view 'theirs'; valid choices: partner, own"):
+        memoryless_accuracy(steps, 5, cfg, view="theirs")
     # A member that ignores its observation and acts uniformly: about 1/5.
     env = spread_with([("uniform", "uniform"), ("uniform", "uniform")])
     steps = collect_partner_steps(env, episodes_per_team=16, seed=2)  # type: ignore[arg-type]

@@ -426,11 +426,12 @@ def test_preset_runs_are_deterministic_and_seeds_differ() -> None:
     for seed in (0, 0, 1):
         rs = a2c.init_runner(cfg, env, model, jax.random.key(seed))  # type: ignore[arg-type]
         rs, metrics = chunk(rs)
-        out.append({k: float(v) for k, v in metrics.items()})
+        out.append({k: np.asarray(v).tolist() for k, v in metrics.items()})
         assert int(rs.update) == 10
     assert out[0] == out[1]
     assert out[0] != out[2]
-    assert all(np.isfinite(v) for v in out[0].values())
+    assert all(np.isfinite(v).all() for v in out[0].values())
+    assert not any(out[0]["nonfinite"])
 
 
 def test_recompute_z_feeds_the_policy_loss_the_training_path_z() -> None:

@@ -18,6 +18,7 @@ on o_t with a_t). Agent models must never feed it to an execution path.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
 import jax
@@ -121,24 +122,32 @@ class Timestep:
     record: PartnerRecord
 
 
-def fork_integrate(
-    damping: float,
-    dt: float,
-    p_force: jax.Array,
-    p_pos: jax.Array,
-    p_vel: jax.Array,
-    mass: jax.Array,
-    moveable: jax.Array,
-    max_speed: jax.Array,
-) -> tuple[jax.Array, jax.Array]:
-    """One entity's step in the particle-environment fork's order: damp the velocity, add the
-    force, clip the speed (``max_speed`` < 0: no cap), then move with the NEW velocity (JaxMARL
-    and mpe2 move with the old one first). The TransAM authors' Spread and LIAM's Tag use it."""
-    p_vel = p_vel * (1 - damping) + (p_force / mass) * dt * moveable
-    speed = jnp.sqrt(jnp.sum(jnp.square(p_vel)))
-    clipped = p_vel / jnp.maximum(speed, 1e-12) * max_speed
-    p_vel = jnp.where((speed > max_speed) & (max_speed >= 0), clipped, p_vel)
-    return p_pos + p_vel * dt, p_vel
+class ForkIntegrator:
+    """Mixin for a JaxMARL MPE environment: the particle-environment fork's integrator.
+
+    One entity's step: damp the velocity, add the force, clip the speed (``max_speed`` < 0: no
+    cap), then move with the NEW velocity (JaxMARL and mpe2 move with the old one first). The
+    TransAM authors' Spread and LIAM's Tag run on the fork. Put it before the JaxMARL class.
+    """
+
+    damping: float
+    dt: float
+
+    @partial(jax.vmap, in_axes=[None, 0, 0, 0, 0, 0, 0])
+    def _integrate_state(
+        self,
+        p_force: jax.Array,
+        p_pos: jax.Array,
+        p_vel: jax.Array,
+        mass: jax.Array,
+        moveable: jax.Array,
+        max_speed: jax.Array,
+    ) -> tuple[jax.Array, jax.Array]:
+        p_vel = p_vel * (1 - self.damping) + (p_force / mass) * self.dt * moveable
+        speed = jnp.sqrt(jnp.sum(jnp.square(p_vel)))
+        clipped = p_vel / jnp.maximum(speed, 1e-12) * max_speed
+        p_vel = jnp.where((speed > max_speed) & (max_speed >= 0), clipped, p_vel)
+        return p_pos + p_vel * self.dt, p_vel
 
 
 def is_concrete(x: Any) -> bool:

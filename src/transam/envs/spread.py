@@ -50,7 +50,7 @@ import jax
 import jax.numpy as jnp
 
 from transam._quiet import quiet
-from transam.envs.core import MPE_ACTION_NAMES, ControlledEnv, EnvError, GameSpec, fork_integrate
+from transam.envs.core import MPE_ACTION_NAMES, ControlledEnv, EnvError, ForkIntegrator, GameSpec
 from transam.envs.joint import JointView
 from transam.envs.population import Population
 
@@ -100,7 +100,7 @@ class Config:
             raise EnvError(f"spread episode_len must be >= 1; got {self.episode_len!r}")
 
 
-class AuthorsSpreadMPE(SimpleSpreadMPE):
+class AuthorsSpreadMPE(ForkIntegrator, SimpleSpreadMPE):
     """JaxMARL's simple_spread with the authors' scenario: 0.8 landmark range, fork integrator."""
 
     @partial(jax.jit, static_argnums=[0])
@@ -121,20 +121,6 @@ class AuthorsSpreadMPE(SimpleSpreadMPE):
             step=jnp.array(0),
         )
         return self.get_obs(state), state
-
-    @partial(jax.vmap, in_axes=[None, 0, 0, 0, 0, 0, 0])
-    def _integrate_state(
-        self,
-        p_force: jax.Array,
-        p_pos: jax.Array,
-        p_vel: jax.Array,
-        mass: jax.Array,
-        moveable: jax.Array,
-        max_speed: jax.Array,
-    ) -> tuple[jax.Array, jax.Array]:
-        return fork_integrate(
-            self.damping, self.dt, p_force, p_pos, p_vel, mass, moveable, max_speed
-        )
 
 
 class SpreadGame:

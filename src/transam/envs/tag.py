@@ -50,13 +50,12 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from functools import partial
 
 import jax
 import jax.numpy as jnp
 
 from transam._quiet import quiet
-from transam.envs.core import MPE_ACTION_NAMES, ControlledEnv, EnvError, GameSpec, fork_integrate
+from transam.envs.core import MPE_ACTION_NAMES, ControlledEnv, EnvError, ForkIntegrator, GameSpec
 from transam.envs.joint import JointView
 from transam.envs.population import PolicyFn, Population
 
@@ -95,7 +94,7 @@ class Config:
             raise EnvError(f"tag episode_len must be >= 1; got {self.episode_len!r}")
 
 
-class LiamTagMPE(SimpleTagMPE):
+class LiamTagMPE(ForkIntegrator, SimpleTagMPE):
     """JaxMARL's simple_tag with the LIAM fork's sizes, force scaling, integrator and walls."""
 
     def __init__(self, hard_walls: bool = False) -> None:
@@ -107,21 +106,6 @@ class LiamTagMPE(SimpleTagMPE):
         """JaxMARL's decoding (force = accel * u), times accel again: the fork's accel^2 * u."""
         u, c = SimpleTagMPE._decode_discrete_action(self, a_idx, action)
         return u * self.accel[a_idx][:, None], c
-
-    @partial(jax.vmap, in_axes=[None, 0, 0, 0, 0, 0, 0])
-    def _integrate_state(
-        self,
-        p_force: jax.Array,
-        p_pos: jax.Array,
-        p_vel: jax.Array,
-        mass: jax.Array,
-        moveable: jax.Array,
-        max_speed: jax.Array,
-    ) -> tuple[jax.Array, jax.Array]:
-        """The fork's order (:func:`~transam.envs.core.fork_integrate`)."""
-        return fork_integrate(
-            self.damping, self.dt, p_force, p_pos, p_vel, mass, moveable, max_speed
-        )
 
     def _apply_environment_force(self, p_force_all: jax.Array, state: State) -> jax.Array:
         """Entity contacts (JaxMARL) plus the fork's soft wall force on movable entities."""

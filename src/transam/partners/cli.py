@@ -204,6 +204,11 @@ class PartnersDiversity:
             f"{levels['memoryless']:.3f}",
             "MLP: partner's own obs + slot -> action, pooled over teams (held out)",
         )
+        table.add_row(
+            "memoryless (own view)",
+            f"{levels['memoryless_own']:.3f}",
+            "the same from the controlled agent's current obs (an agent model without history)",
+        )
         table.add_row("majority", f"{levels['majority']:.3f}", "each slot's most frequent action")
         console.print(table)
         sampled = set(levels["sampled"])
@@ -226,6 +231,7 @@ class PartnersDiversity:
                 "episodes_per_team": ClassifierConfig().episodes_per_team,
                 "action_ceiling": round(levels["ceiling"], 4),
                 "memoryless_accuracy": round(levels["memoryless"], 4),
+                "memoryless_own_accuracy": round(levels["memoryless_own"], 4),
                 "majority_rate": round(levels["majority"], 4),
                 "member_ceilings": {n: round(v, 4) for n, v in levels["members"].items()},
                 "ceiling_sampled": levels["sampled"],

@@ -195,6 +195,7 @@ class PartnerSteps:
     """The partners' observations and actions over whole episodes, one team per episode."""
 
     obs: np.ndarray  # [E, T, N, D] each partner's own observation
+    own_obs: np.ndarray  # [E, T, D0] the controlled agent's observation at the same step
     actions: np.ndarray  # [E, T, N] int
     team: np.ndarray  # [E] team index
     live: np.ndarray  # [E, T] bool: the step belongs to the episode
@@ -217,17 +218,19 @@ def collect_partner_steps(env: ControlledEnv, episodes_per_team: int, seed: int)
             state, alive = carry
             ka, ks = jax.random.split(k)
             a = jax.random.randint(ka, (), 0, n_act, dtype=jnp.int32)
+            own = state.obs
             state, ts = env.step(ks, state, a)
             rec = ts.record
-            return (state, alive & ~ts.done), (rec.other_obs, rec.other_actions, alive)
+            return (state, alive & ~ts.done), (rec.other_obs, own, rec.other_actions, alive)
 
         keys = jax.random.split(k1, length)
         return jax.lax.scan(body, (state, jnp.ones((), bool)), keys)[1]
 
     keys = jax.random.split(jax.random.PRNGKey(seed), team.shape[0])
-    obs, actions, live = jax.jit(jax.vmap(episode))(keys, jnp.asarray(team))
+    obs, own, actions, live = jax.jit(jax.vmap(episode))(keys, jnp.asarray(team))
     return PartnerSteps(
         obs=np.asarray(obs, np.float32),
+        own_obs=np.asarray(own, np.float32),
         actions=np.asarray(actions, np.int64),
         team=team,
         live=np.asarray(live, bool),
@@ -293,15 +296,23 @@ def action_ceiling(
 
 
 def memoryless_accuracy(
-    steps: PartnerSteps, num_actions: int, cfg: LevelsConfig | None = None
+    steps: PartnerSteps, num_actions: int, cfg: LevelsConfig | None = None, view: str = "partner"
 ) -> dict[str, float]:
-    """{"accuracy": held-out accuracy of an MLP on (partner obs, slot one-hot) -> partner
+    """{"accuracy": held-out accuracy of an MLP on (observation, slot one-hot) -> partner
     action pooled over all teams, "majority": each slot's most frequent training action scored
-    on the test samples}; every 4th episode of each team is test."""
+    on the test samples}; every 4th episode of each team is test. ``view``: ``"partner"`` reads
+    the partner's own observation; ``"own"`` the controlled agent's current observation (what
+    an agent model has at one step, without its history: the level it must beat)."""
     cfg = cfg or LevelsConfig()
     e, t, n, _ = steps.obs.shape
     slot = np.broadcast_to(np.eye(n, dtype=np.float32), (e, t, n, n))
-    x = np.concatenate([steps.obs, slot], -1)
+    if view == "partner":
+        seen = steps.obs
+    elif view == "own":
+        seen = np.broadcast_to(steps.own_obs[:, :, None, :], (e, t, n, steps.own_obs.shape[-1]))
+    else:
+        raise ValueError(f"unknown view {view!r}; valid choices: partner, own")
+    x = np.concatenate([seen, slot], -1)
     test = np.broadcast_to((steps.episode % 4 == 0)[:, None, None], (e, t, n))
     live = np.broadcast_to(steps.live[..., None], (e, t, n))
     slots = np.broadcast_to(np.arange(n), (e, t, n))
@@ -321,16 +332,19 @@ def memoryless_accuracy(
 
 
 def action_levels(env: ControlledEnv, cfg: LevelsConfig | None = None) -> dict[str, Any]:
-    """The ceiling and the memoryless level of ``env``'s population (module docstring):
-    {"ceiling", "members", "sampled", "memoryless", "majority", "steps"}."""
+    """The ceiling and the memoryless levels of ``env``'s population (module docstring):
+    {"ceiling", "members", "sampled", "memoryless" (from the partner's own observation),
+    "memoryless_own" (from the controlled agent's current observation), "majority", "steps"}."""
     cfg = cfg or LevelsConfig()
     steps = collect_partner_steps(env, cfg.episodes_per_team, cfg.seed)
     num_actions = env.spec.other_num_actions
     ceiling = action_ceiling(env.population, steps, num_actions, cfg.samples, cfg.seed)
     memoryless = memoryless_accuracy(steps, num_actions, cfg)
+    own = memoryless_accuracy(steps, num_actions, cfg, view="own")
     return {
         **ceiling,
         "memoryless": memoryless["accuracy"],
+        "memoryless_own": own["accuracy"],
         "majority": memoryless["majority"],
         "steps": int(steps.live.sum()) * steps.obs.shape[2],
     }

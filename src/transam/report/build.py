@@ -194,7 +194,7 @@ def partner_levels(envs: list[str], split: str = "default") -> dict[str, dict[st
         except (FileNotFoundError, KeyError, ValueError):
             found = {}
         ok = all(isinstance(found.get(k), int | float) for k in LEVEL_KEYS)
-        keep = (*LEVEL_KEYS, "population_digest", "measured_by")
+        keep = (*LEVEL_KEYS, "memoryless_own_accuracy", "population_digest", "measured_by")
         out[env] = {k: found.get(k) for k in keep} if ok else None
     return out
 
@@ -209,9 +209,13 @@ def _levels_md(table: Table, levels: dict[str, dict[str, Any] | None]) -> list[s
     for key, label in (
         ("action_ceiling", "ceiling E[max π(a|o)]"),
         ("memoryless_accuracy", "memoryless, team-agnostic"),
+        ("memoryless_own_accuracy", "memoryless, controlled agent's view"),
         ("majority_rate", "majority action"),
     ):
-        cells = [pct(lv[key]) if (lv := levels.get(e)) else "not recorded" for e in envs]
+        cells = [
+            pct(lv[key]) if (lv := levels.get(e)) and lv.get(key) is not None else "not recorded"
+            for e in envs
+        ]
         rows.append([f"*{label}*", *cells])
     for m in _methods_with(table, ACC_NEWEST):
         cells = []
@@ -228,7 +232,9 @@ def _levels_md(table: Table, levels: dict[str, dict[str, Any] | None]) -> list[s
         "partners' mean most-likely-action probability under their own observations (no "
         "predictor can expect more); the *memoryless* level is an MLP's held-out accuracy at "
         "predicting a partner's action from that partner's current observation alone, pooled "
-        "over all teams (no team, no history); *majority* is the most frequent action's rate. "
+        "over all teams (no team, no history), and the same from the controlled agent's current "
+        "observation (what an agent model has at one step without its history); *majority* is "
+        "the most frequent action's rate. "
         "A model at the memoryless level has learned nothing about whom it plays with."
         + (f" Measured on population digests: {digests}." if digests else ""),
         "",
