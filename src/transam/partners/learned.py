@@ -38,7 +38,7 @@ from flax.traverse_util import flatten_dict, unflatten_dict
 from safetensors.numpy import load_file, save_file
 
 from transam.envs.joint import JointView, play
-from transam.envs.population import Member, PolicyFn, Population, ProbsFn, Team
+from transam.envs.population import Member, PolicyFn, Population, Team
 from transam.partners import liam
 from transam.partners.authors import ARCH as AUTHORS_ARCH
 from transam.partners.authors import authors_logits
@@ -450,16 +450,22 @@ def _member_act(entry: dict[str, Any]) -> str:
     return act
 
 
+def learned_member(params: dict[str, Any], entry: dict[str, Any], env: str) -> Member:
+    """One manifest member as a population member: its architecture's logits (built once),
+    acting by its action selection (``"act"``: ``"sample"`` (default) or ``"argmax"``), with
+    the distribution it draws from (softmax, or a one-hot of the argmax) as ``probs``."""
+    logits, act = _member_logits(params, entry, env), _member_act(entry)
+    return Member(
+        entry["name"],
+        select(logits, act),
+        kind=f"{entry['kind']}:{entry['recipe']}",
+        probs=select_probs(logits, act),
+    )
+
+
 def member_policy(params: dict[str, Any], entry: dict[str, Any], env: str) -> PolicyFn:
-    """The act function of one manifest member: its architecture's logits, then its action
-    selection (``"act"``: ``"sample"`` (default) or ``"argmax"``)."""
-    return select(_member_logits(params, entry, env), _member_act(entry))
-
-
-def member_probs(params: dict[str, Any], entry: dict[str, Any], env: str) -> ProbsFn:
-    """The action distribution :func:`member_policy` draws from (softmax, or a one-hot of the
-    argmax): what an accuracy ceiling needs."""
-    return select_probs(_member_logits(params, entry, env), _member_act(entry))
+    """The act function of one manifest member (:func:`learned_member`)."""
+    return learned_member(params, entry, env).act
 
 
 def learned_members(
@@ -473,15 +479,7 @@ def learned_members(
     if missing:
         where = (root or data_dir(env)) / f"{split}.safetensors"
         raise ValueError(f"{where}: no weights for member(s) {', '.join(missing)}")
-    return {
-        m["name"]: Member(
-            m["name"],
-            member_policy(params[m["name"]], m, env),
-            kind=f"{m['kind']}:{m['recipe']}",
-            probs=member_probs(params[m["name"]], m, env),
-        )
-        for m in entry["members"]
-    }
+    return {m["name"]: learned_member(params[m["name"]], m, env) for m in entry["members"]}
 
 
 def heuristic_pool(env: str) -> dict[str, Member]:

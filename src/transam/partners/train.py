@@ -125,11 +125,16 @@ def make_logits(params: Params, view_name: str, num_actions: int, hidden: int) -
     return lambda obs: apply(net, params, feat(obs))
 
 
+def check_act(act: str) -> None:
+    """Raise ValueError for an action selection outside :data:`ACT_MODES`, naming the choices."""
+    if act not in ACT_MODES:
+        raise ValueError(f"unknown action selection {act!r}; valid choices: {', '.join(ACT_MODES)}")
+
+
 def select(logits_fn: LogitsFn, act: str = "sample") -> PolicyFn:
     """A member's act function from its logits: ``"sample"`` draws from the softmax,
     ``"argmax"`` plays the most likely action (greedy, deterministic; the key is unused)."""
-    if act not in ACT_MODES:
-        raise ValueError(f"unknown action selection {act!r}; valid choices: {', '.join(ACT_MODES)}")
+    check_act(act)
     if act == "argmax":
         return lambda key, obs: jnp.argmax(logits_fn(obs)).astype(jnp.int32)
     return lambda key, obs: jax.random.categorical(key, logits_fn(obs)).astype(jnp.int32)
@@ -138,8 +143,7 @@ def select(logits_fn: LogitsFn, act: str = "sample") -> PolicyFn:
 def select_probs(logits_fn: LogitsFn, act: str = "sample") -> ProbsFn:
     """The action distribution :func:`select` draws from: the softmax for ``"sample"``, a
     one-hot of the argmax for ``"argmax"``."""
-    if act not in ACT_MODES:
-        raise ValueError(f"unknown action selection {act!r}; valid choices: {', '.join(ACT_MODES)}")
+    check_act(act)
     if act == "argmax":
 
         def greedy(obs: jax.Array) -> jax.Array:
