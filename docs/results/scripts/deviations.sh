@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# The deviation table (issue 19, point 3): each of our departures from the authors' loop,
-# measured one at a time against the preset. Every run is `--preset authors` with ONE setting
-# put back to our default; same population, seeds, length and evaluation as parity.sh, whose
-# `authors` run is the baseline (run parity.sh first, or set BASELINE). Then the table.
+# The deviation table (docs/results/parity/README.md): each of our departures from the
+# authors' loop, measured one at a time against the preset. Every run is `--preset authors`
+# with ONE setting put back to our default; same population, seeds, length and evaluation as
+# parity.sh, whose `authors` run is the baseline (run parity.sh first, or set BASELINE). Then
+# the table.
 #
 #   docs/results/scripts/deviations.sh                  all rows (14 runs of 3 seeds: long)
 #   ONLY="clock critic_no_z" docs/results/scripts/deviations.sh     some rows

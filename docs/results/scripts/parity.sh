@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# Parity with the authors' TransAM loop on Spread (issue 19, point 2).
+# Parity with the authors' TransAM loop on Spread (docs/results/parity/README.md).
 #
 # TransAM with the authors' loop (--preset authors) and with our defaults, against the
 # authors' Spread population, 3 vmapped seeds each, 625k steps, an evaluation every 25k
 # steps (1000 episodes' worth) on 100 episodes; then the figure of both against the authors'
-# measured curve (../../shared/reference/authors-loop/curve.csv) in docs/results/parity/.
+# measured curve (CURVE: not part of the repository, see docs/results/parity/README.md) in
+# docs/results/parity/.
 #
 # Before: import the population,
 #   transam partners import-authors spread PATH --out runs/authors-pop
