@@ -254,7 +254,7 @@ class Train(TrainConfig):
 
     preset: PresetName = "none"
     """start from a named set of settings, then apply the other flags: 'authors' is the first
-    author's Spread training loop (transam.train.presets, README "The authors' loop");
+    author's Spread training loop (transam.train.presets, docs/methods.md);
     `--preset authors --help` shows its values as the defaults"""
 
     def run(self) -> None:

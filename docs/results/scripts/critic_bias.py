@@ -1,4 +1,6 @@
-"""The end-of-episode critic bias, with and without the policy's clock (docs/results/README.md).
+"""The end-of-episode critic bias, with and without the policy's clock.
+
+See docs/notes/2026-11-critic-end-of-episode-bias.md.
 
 Trains NAM on Spread against the heuristic partners with the reference A2C settings (shared
 actor-critic trunk; only the clock varies) for

@@ -1,5 +1,6 @@
 """Settings of the baseline agent models (TransAM's own are :class:`TransAMConfig`, which the
-transformer baselines share). Defaults give every method comparable capacity; see README."""
+transformer baselines share). Defaults give every method comparable capacity; see
+docs/methods.md."""
 
 from __future__ import annotations
 

@@ -142,7 +142,7 @@ class PartnersDiversity:
     heldout: bool = False
     heuristic: bool = False  # the scripted population (partners="heuristic") instead
     window: int = 10  # steps per classifier sample
-    record: bool = False  # store the results in the shipped manifest (the README quotes it)
+    record: bool = False  # store the results in the shipped manifest (docs/partners.md quotes it)
 
     def run(self) -> None:
         from rich.markup import escape

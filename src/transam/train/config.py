@@ -84,12 +84,12 @@ class A2CConfig:
     reference, the paper's V(o, E^o)). Off (default): the critic is its own LSTM on o_t (and
     the clock) only; the actor still conditions on z. With the reference's shared trunk the
     encoder methods' policies collapse early on Spread, below random play; with the critic on
-    its own they do not (docs/results/README.md, "The encoder methods' early collapse")"""
+    its own they do not (docs/notes/2026-11-encoder-collapse-critic-z.md)"""
     time_feature: bool = True
     """append the agent's own clock t / episode_len to the policy input (actor and critic).
     The reference does not, and treats the time limit as terminal: its critic cannot tell the
     last steps of an episode from the first and overestimates the future there, which biases
-    every end-of-episode advantage (docs/results/README.md, "The end-of-episode critic bias")"""
+    every end-of-episode advantage (docs/notes/2026-11-critic-end-of-episode-bias.md)"""
     rollouts_per_collect: int = 1
     """rollouts collected with the same parameters before learning from them; then one update
     per rollout, in order, each starting from the LSTM state and window acting had (reference:
