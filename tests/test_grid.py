@@ -6,10 +6,11 @@ import json
 
 import pytest
 
-from transam import envs, grid
+from transam import envs
 from transam.compose import make_env
+from transam.reproduce import grid
 from transam.train.config import ConfigError
-from transam.train.loop import make_plan
+from transam.train.programs import make_plan
 
 
 @pytest.mark.parametrize("name", envs.ENV_NAMES)

@@ -28,9 +28,10 @@ from transam.compose import make_env
 from transam.envs.core import ControlledEnv
 from transam.models import METHOD_NAMES, AgentModel, BaselineConfig, TransAMConfig, make_model
 from transam.models.base import LocalStep, PartnerView
+from transam.rundir import read_metrics
 from transam.train import a2c
 from transam.train.config import A2CConfig, EvalConfig, TrainConfig
-from transam.train.loop import read_metrics, train
+from transam.train.loop import train
 
 TINY_T = TransAMConfig(context=3, width=16, layers=1, heads=2, ff_width=32, dropout=0.0)
 TINY_B = BaselineConfig(hidden=16, embed_dim=16, decoder_hidden=16)

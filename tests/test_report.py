@@ -14,13 +14,14 @@ import numpy as np
 import pytest
 import scipy.stats
 
+from transam.cli import Report
 from transam.envs import ENV_NAMES
 from transam.models import METHOD_NAMES
-from transam.report import Report, build_report
-from transam.report.build import fmt_stat
-from transam.report.claims import combine
-from transam.report.load import display, read_pca
-from transam.report.stats import (
+from transam.reproduce.report.build import build_report
+from transam.reproduce.report.claims import combine
+from transam.reproduce.report.load import display, read_pca
+from transam.reproduce.report.markdown import fmt_stat
+from transam.reproduce.report.stats import (
     bootstrap_ci,
     curve_ci,
     difference,

@@ -16,8 +16,8 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from transam.report.load import METHOD_ORDER, RunData, display
-from transam.train.loop import write_atomic
+from transam.reproduce.report.load import METHOD_ORDER, RunData, display
+from transam.rundir import write_atomic
 
 ENV_TITLE = {
     "tag": "Tag (predator-prey)",

@@ -124,7 +124,7 @@ def _log(out: Path, spec: RunSpec, event: dict[str, Any]) -> None:
 
 def read_launches(out: str | Path, spec: RunSpec) -> list[dict[str, Any]]:
     """The launch events of one run (see :func:`run_one`)."""
-    from transam.train.loop import read_metrics
+    from transam.rundir import read_metrics
 
     return read_metrics(Path(out) / "log" / f"{spec.name}.jsonl")
 
@@ -132,9 +132,9 @@ def read_launches(out: str | Path, spec: RunSpec) -> list[dict[str, Any]]:
 def run_one(out: str | Path, spec: RunSpec, budget: Budget) -> dict[str, Any]:
     """Train (or resume, or skip) one grid run, then evaluate it on the training and held-out
     partners where not done yet. Safe to call again after any failure; returns a summary."""
-    from transam.evaluation import evaluate_run, evaluation_path
+    from transam.evaluation.final import evaluate_run
+    from transam.rundir import checkpoints, evaluation_path
     from transam.train.loop import train
-    from transam.train.rundir import checkpoints
 
     out = Path(out)
     config = run_config(spec, budget, out)
@@ -189,7 +189,7 @@ def open_grid(out: Path, budget_name: str, specs: list[RunSpec], argv: list[str]
     """Create or extend ``grid.json``; a grid directory keeps one budget."""
     if budget_name not in BUDGETS:
         raise ConfigError(f"unknown budget {budget_name!r}; valid choices: {', '.join(BUDGETS)}")
-    from transam.train.loop import write_json
+    from transam.rundir import write_json
 
     path = out / "grid.json"
     if path.exists():
@@ -220,7 +220,7 @@ def open_grid(out: Path, budget_name: str, specs: list[RunSpec], argv: list[str]
 
 def close_grid(out: Path, failures: list[str]) -> None:
     """Stamp the end time (and failures) of this invocation into grid.json."""
-    from transam.train.loop import write_json
+    from transam.rundir import write_json
 
     path = out / "grid.json"
     grid = json.loads(path.read_text())

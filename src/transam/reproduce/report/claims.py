@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from transam.report.stats import difference, interval
+from transam.reproduce.report.stats import difference, interval
 
 Relation = Literal["better", "not_worse", "similar"]
 Verdict = Literal["holds", "does not hold", "inconclusive", "not run"]
@@ -352,7 +352,7 @@ def evaluate_check(check: Check, cells: dict[str, Any]) -> dict[str, Any] | None
 
 def evaluate_claims(cells: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
     """Every claim's verdict, per environment and overall, with the numbers behind it
-    (``cells``: env -> method -> aggregated cell, see :mod:`transam.report.build`)."""
+    (``cells``: env -> method -> aggregated cell, see :func:`~.aggregate.cells`)."""
     results = []
     for claim in CLAIMS:
         per_env: dict[str, Any] = {}
