@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from transam.envs import ENV_NAMES
-from transam.models import METHOD_NAMES
+from transam.registry import PAPER_ENVS, PAPER_METHODS
 from transam.report import Report, build_report
 from transam.report.build import fmt_stat
 from transam.report.claims import combine
@@ -47,8 +46,8 @@ def write_grid(
     out: Path,
     ret: dict[str, float],
     acc: dict[str, float],
-    envs: Iterable[str] = ENV_NAMES,
-    methods: Iterable[str] = METHOD_NAMES,
+    envs: Iterable[str] = PAPER_ENVS,
+    methods: Iterable[str] = PAPER_METHODS,
     seeds: Iterable[int] = (0, 1, 2),
     absent: Iterable[str] = (),
     unfinished: Iterable[str] = (),
@@ -455,7 +454,7 @@ def test_report_tables_match_results_json(good: tuple[Path, dict[str, Any], str]
         body = md.split(section, 1)[1].split("\n### ", 1)[0]
         header = next(ln for ln in body.splitlines() if ln.startswith("| method |"))
         envs = [c.strip() for c in header.strip("|").split("|")][1:]
-        for method in METHOD_NAMES:
+        for method in PAPER_METHODS:
             row = next(
                 (ln for ln in body.splitlines() if ln.startswith(f"| **{display(method)}** |")),
                 None,

@@ -64,6 +64,7 @@ import jax.numpy as jnp
 import numpy as np
 import tyro
 
+from transam import registry
 from transam.models.base import ACC_ALL, ACC_NEWEST, MSE_ALL
 from transam.train.config import ConfigError, TrainConfig, with_added_settings
 
@@ -77,8 +78,6 @@ embed_dim > N/2 the unpenalised least squares would interpolate the training hal
 EVAL_METRICS = (ACC_NEWEST, ACC_ALL, "obs_mse", MSE_ALL)
 """The agent-modeling metrics an evaluation may hold (older files: ``action_accuracy``, the
 newest position's, see :data:`~transam.models.base.LEGACY_METRICS`)."""
-NO_EMBEDDING = frozenset({"nam"})
-"""Methods whose z is not a learned representation (NAM: the one-hot previous action)."""
 
 
 def evaluation_label(partners: str) -> str:
@@ -432,7 +431,7 @@ def _evaluate_locked(
     out["per_step"] = per_step
 
     pca = None
-    if config.method in NO_EMBEDDING:
+    if not registry.method_entry(config.method).embedding:
         notes.append(f"{config.method} has no learned embedding: no probe or projection")
     else:
         z = np.asarray(ep.z, np.float64)

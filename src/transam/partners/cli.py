@@ -15,7 +15,8 @@ import tyro
 from rich.console import Console
 from rich.table import Table
 
-EnvName = Literal["tag", "spread", "overcooked", "lbf"]
+from transam.registry import EnvName
+
 console = Console()
 
 

@@ -17,9 +17,11 @@ from typing import Any
 
 import tyro
 
+from transam import registry
+from transam.registry import display
 from transam.report import aggregate, claims
 from transam.report.aggregate import SOURCE_EVAL
-from transam.report.load import METHOD_ORDER, Grid, display, load_grid
+from transam.report.load import METHOD_ORDER, Grid, load_grid
 from transam.report.stats import CONFIDENCE, RESAMPLES, RNG_SEED
 from transam.train.loop import write_atomic, write_json
 
@@ -70,12 +72,6 @@ ACCURACY_NOTE = (
     "accuracy of about 64% gives about 86% over all positions). Observation MSE likewise: "
     "`obs_mse` is the newest position's."
 )
-MARL_EVAL_NAMES = {
-    "tag": ("mpe", "simple_tag"),
-    "spread": ("mpe", "simple_spread"),
-    "overcooked": ("overcooked", "cramped_room"),
-    "lbf": ("lbf", "20x20-2p-4f"),
-}
 FIGURES = {
     "returns": "returns_training.png",
     ACC_NEWEST: "action_accuracy_training.png",
@@ -294,7 +290,9 @@ def marl_eval(grid: Grid) -> dict[str, Any]:
     for run in grid.runs:
         if run.status == "missing":
             continue
-        env_name, task = MARL_EVAL_NAMES.get(run.env, (run.env, run.env))
+        known = run.env in registry.env_names()
+        names = registry.env_entry(run.env).marl_eval if known else None
+        env_name, task = names or (run.env, run.env)
         entry: dict[str, Any] = {}
         k = 0
         for rec in run.metrics:
@@ -505,7 +503,7 @@ def render(results: dict[str, Any], table: Table) -> str:
         "### Spread ablation (paper Table 1)",
         "",
     ]
-    ablation = ["transam", "transam-pool", "transam-fuse", "transam-im"]
+    ablation = ["transam", "transam-pool", "transam-fuse", "transam-im"]  # Table 1's rows
     spread = table.get("spread", {})
     rows = [
         [

@@ -52,7 +52,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from transam.compose import PARTNER_CHOICES, make_env, resolve_partners
+from transam.compose import make_env, partner_choices, resolve_partners
 from transam.envs.core import ControlledEnv
 from transam.models import make_model
 from transam.models.base import ACC_NEWEST, AgentModel
@@ -277,7 +277,7 @@ def _check_population(out: Path, config: TrainConfig) -> None:
     if recorded is None:
         return
     was, now = recorded["digest"], population_record(config)["digest"]
-    shipped = config.partners in PARTNER_CHOICES
+    shipped = config.partners in partner_choices(config.env)
     how = "the transam version it started with" if shipped else "the directory as it was"
     if was != now:
         raise RunDirError(
