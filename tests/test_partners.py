@@ -13,7 +13,7 @@ from transam.envs.joint import play
 from transam.partners import learned, liam
 from transam.partners.recipes import IMPORTED, Family, Recipe, Run, recipe
 from transam.partners.spread import AUTHORS_HEURISTICS
-from transam.partners.train import FEATURES, PPOConfig, make_train
+from transam.partners.train import PPOConfig, features, make_train
 
 ENVS = ("tag", "spread", "overcooked", "lbf")
 OBS_DIMS = {"tag": 16, "spread": 18, "overcooked": 520, "lbf": 18}
@@ -44,7 +44,7 @@ def test_manifest_and_weights_agree(env: str) -> None:
     splits = shipped(env)
     assert splits, f"no shipped population for {env}"
     manifest = learned.load_manifest(env)
-    feat_dim = int(FEATURES[env](jnp.zeros(OBS_DIMS[env])).shape[0])
+    feat_dim = int(features(env)(jnp.zeros(OBS_DIMS[env])).shape[0])
     for split in splits:
         entry = manifest[split]
         params = learned.load_params(env, split)

@@ -17,15 +17,12 @@ from rich.console import Console
 from rich.table import Table
 
 from transam.compose import PartnerChoice
-from transam.models import METHOD_NAMES
-from transam.train.config import ConfigError, MethodName, TrainConfig
+from transam.registry import PAPER_ENVS, PAPER_METHODS, EnvName, MethodName
+from transam.train.config import ConfigError, TrainConfig
 from transam.train.presets import PRESET_NAMES
 
 PresetName = Literal["none", "authors"]
 
-EnvName = Literal["tag", "spread", "overcooked", "lbf"]
-ALL_ENVS: tuple[EnvName, ...] = ("tag", "spread", "overcooked", "lbf")
-METHODS: tuple[MethodName, ...] = METHOD_NAMES  # type: ignore[assignment]
 
 console = Console()
 _ARGV: list[str] = []  # this invocation's arguments (recorded by `reproduce`)
@@ -53,7 +50,7 @@ class EnvsList:
         for col in ("env", "obs", "acts", "others", "other obs", "other acts", "steps", "teams"):
             table.add_column(col, no_wrap=True, justify="left" if col == "env" else "right")
         notes = []
-        for name in _envs_for(self.partners, ALL_ENVS):
+        for name in _envs_for(self.partners, PAPER_ENVS):
             env = make_env(name, partners=self.partners)
             s = env.spec
             table.add_row(
@@ -84,7 +81,7 @@ class EnvsBench:
     reported (compilation excluded).
     """
 
-    envs: tuple[EnvName, ...] = ALL_ENVS
+    envs: tuple[EnvName, ...] = PAPER_ENVS
     """environments to time"""
     num_envs: int = 1024
     """vmapped environment copies"""
@@ -124,7 +121,7 @@ class EnvsRollout:
     """Roll out every environment with its partner population and a random controlled agent
     (or, on Spread, the landmark rule), and print each partner team's episode returns."""
 
-    envs: tuple[EnvName, ...] = ALL_ENVS
+    envs: tuple[EnvName, ...] = PAPER_ENVS
     """environments to roll out"""
     episodes: int = 20
     """episodes per parallel copy (about episodes x copies / teams per team)"""
@@ -206,10 +203,10 @@ class EnvsRollout:
 def _envs_for(partners: str, envs: tuple[EnvName, ...]) -> tuple[str, ...]:
     """``envs``, or for a population directory only the env its manifest names (it fits no
     other); an unknown ``partners`` value stops with the valid choices."""
-    from transam.compose import PARTNER_CHOICES, check_partners
+    from transam.compose import check_partners, partner_choices
     from transam.partners.learned import read_population_dir
 
-    if check_partners(partners) in PARTNER_CHOICES:
+    if check_partners(partners) in partner_choices():
         return envs
     made_for = read_population_dir(partners).get("env")
     if made_for not in envs:
@@ -304,9 +301,9 @@ class Reproduce:
     """smoke: minutes (a test); small: a few hours on 2 CPU cores; paper: 10M steps x 5 seeds"""
     out: str = "runs/reproduce"
     """grid directory (one budget per directory)"""
-    envs: tuple[EnvName, ...] = ALL_ENVS
+    envs: tuple[EnvName, ...] = PAPER_ENVS
     """environments"""
-    methods: tuple[MethodName, ...] = METHODS
+    methods: tuple[MethodName, ...] = PAPER_METHODS
     """methods"""
     seeds: tuple[int, ...] = ()
     """seeds (default: 0 .. the budget's seed count - 1)"""

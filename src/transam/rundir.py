@@ -66,7 +66,7 @@ from typing import Any
 import msgpack
 from flax import serialization
 
-from transam.compose import PARTNER_CHOICES
+from transam.compose import partner_choices
 from transam.train.config import ConfigError, TrainConfig, with_added_settings
 
 KEEP_CHECKPOINTS = 2
@@ -228,7 +228,7 @@ def _check_population(out: Path, config: TrainConfig) -> None:
     if recorded is None:
         return
     was, now = recorded["digest"], population_record(config)["digest"]
-    shipped = config.partners in PARTNER_CHOICES
+    shipped = config.partners in partner_choices(config.env)
     how = "the transam version it started with" if shipped else "the directory as it was"
     if was != now:
         raise RunDirError(

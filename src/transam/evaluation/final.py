@@ -55,6 +55,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from transam import registry
 from transam.evaluation.figure import evaluation_figure
 from transam.evaluation.probe import linear_probe, pca_2d
 from transam.models.base import ACC_ALL, ACC_NEWEST, MSE_ALL
@@ -79,8 +80,6 @@ from transam.train.config import ConfigError, TrainConfig
 EVAL_METRICS = (ACC_NEWEST, ACC_ALL, "obs_mse", MSE_ALL)
 """The agent-modeling metrics an evaluation may hold (older files: ``action_accuracy``, the
 newest position's, see :data:`~transam.models.base.LEGACY_METRICS`)."""
-NO_EMBEDDING = frozenset({"nam"})
-"""Methods whose z is not a learned representation (NAM: the one-hot previous action)."""
 
 
 def population_for(trained: str, partners: str) -> str:
@@ -254,7 +253,7 @@ def _evaluate_locked(
     out["per_step"] = per_step
 
     pca = None
-    if config.method in NO_EMBEDDING:
+    if not registry.method_entry(config.method).embedding:
         notes.append(f"{config.method} has no learned embedding: no probe or projection")
     else:
         z = np.asarray(ep.z, np.float64)

@@ -27,16 +27,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from transam.envs import ENV_NAMES
-from transam.models import METHOD_NAMES
+from transam import registry
 from transam.train.config import ConfigError, EvalConfig, TrainConfig
 
 BudgetName = Literal["smoke", "small", "paper"]
 EVAL_PARTNERS: tuple[Literal["train", "heldout"], ...] = ("train", "heldout")
-
-# Controlled-agent steps per episode (make_env(...).spec.episode_len), so a grid can be planned
-# without building environments; checked against the environments in the tests.
-EPISODE_LEN = {"tag": 50, "spread": 25, "overcooked": 400, "lbf": 50}
 
 
 @dataclass(frozen=True)
@@ -88,7 +83,10 @@ class RunSpec:
 
 def grid_specs(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int]) -> list[RunSpec]:
     """The runs of a grid in a fixed order (env, method, seed), after checking the names."""
-    for what, values, valid in (("env", envs, ENV_NAMES), ("method", methods, METHOD_NAMES)):
+    for what, values, valid in (
+        ("env", envs, registry.env_names()),
+        ("method", methods, registry.method_names()),
+    ):
         for v in values:
             if v not in valid:
                 raise ConfigError(f"unknown {what} {v!r}; valid choices: {', '.join(valid)}")
@@ -101,7 +99,9 @@ def grid_specs(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int]
 
 def run_config(spec: RunSpec, budget: Budget, out: str | Path) -> TrainConfig:
     """The training configuration of one grid run: the reference settings plus the budget."""
-    every = max(1, round(budget.total_steps / (budget.evals * EPISODE_LEN[spec.env])))
+    # the registry's episode length: a grid is planned without building environments
+    episode_len = registry.env_entry(spec.env).episode_len
+    every = max(1, round(budget.total_steps / (budget.evals * episode_len)))
     return TrainConfig(
         env=spec.env,  # type: ignore[arg-type]
         method=spec.method,  # type: ignore[arg-type]

@@ -33,6 +33,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from transam.registry import PAPER_ENVS, methods_of
 from transam.reproduce.report.stats import difference, interval
 
 Relation = Literal["better", "not_worse", "similar"]
@@ -61,9 +62,9 @@ METRIC_LABEL = {
     "trend:action_accuracy_newest": "action accuracy (newest), late - early in the episode",
     "trend:obs_mse": "obs. MSE, late - early in the episode",
 }
-BASELINES = ("nam", "liam", "carl", "cail", "pel")
+BASELINES = methods_of("baseline")
 """The non-Oracle baselines of the paper."""
-ALL_ENVS = ("tag", "spread", "overcooked", "lbf")
+ALL_ENVS = PAPER_ENVS
 
 
 @dataclass(frozen=True)

@@ -19,35 +19,15 @@ from typing import Any, Literal
 
 import numpy as np
 
-from transam.envs import ENV_NAMES
-from transam.models import METHOD_NAMES
+from transam import registry
 from transam.models.base import LEGACY_METRICS
 from transam.rundir import evaluation_path, projection_path, read_metrics
 from transam.train.config import ConfigError
 
 # The paper's order.
-ENV_ORDER: tuple[str, ...] = ENV_NAMES
-METHOD_ORDER: tuple[str, ...] = METHOD_NAMES
+ENV_ORDER: tuple[str, ...] = registry.PAPER_ENVS
+METHOD_ORDER: tuple[str, ...] = registry.PAPER_METHODS
 PARTNERS = ("train", "heldout")
-DISPLAY = {
-    "transam": "TransAM",
-    "nam": "NAM",
-    "oracle": "Oracle",
-    "liam": "LIAM",
-    "carl": "CARL",
-    "cail": "CAIL",
-    "pel": "PEL",
-    "transam-fuse": "TransAM-fuse",
-    "transam-pool": "TransAM-pool",
-    "transam-im": "TransAM-im",
-}
-
-
-def display(method: str) -> str:
-    """The paper's name of a method."""
-    return DISPLAY.get(method, method)
-
-
 Status = Literal["missing", "unfinished", "finished"]
 
 

@@ -7,9 +7,10 @@ from __future__ import annotations
 
 from typing import Any
 
+from transam.registry import display
 from transam.reproduce.report import claims
 from transam.reproduce.report.aggregate import ACC_ALL, ACC_NEWEST, SOURCE_EVAL
-from transam.reproduce.report.load import METHOD_ORDER, display
+from transam.reproduce.report.load import METHOD_ORDER
 from transam.reproduce.report.results import CI_METHOD, FIGURES, Table
 
 METRIC_TITLE = {
@@ -360,7 +361,7 @@ def render(results: dict[str, Any], table: Table) -> str:
         "### Spread ablation (paper Table 1)",
         "",
     ]
-    ablation = ["transam", "transam-pool", "transam-fuse", "transam-im"]
+    ablation = ["transam", "transam-pool", "transam-fuse", "transam-im"]  # Table 1's rows
     spread = table.get("spread", {})
     rows = [
         [

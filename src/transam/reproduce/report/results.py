@@ -10,6 +10,7 @@ import shlex
 from collections import Counter
 from typing import Any
 
+from transam import registry
 from transam.reproduce.report import aggregate, claims
 from transam.reproduce.report.load import Grid
 from transam.reproduce.report.stats import CONFIDENCE, RESAMPLES, RNG_SEED
@@ -36,12 +37,6 @@ CI_METHOD = " ".join(
 """How the intervals are computed (results.json's ``statistics.description``; the report
 quotes it)."""
 ACC_NEWEST, ACC_ALL = aggregate.ACC_NEWEST, aggregate.ACC_ALL
-MARL_EVAL_NAMES = {
-    "tag": ("mpe", "simple_tag"),
-    "spread": ("mpe", "simple_spread"),
-    "overcooked": ("overcooked", "cramped_room"),
-    "lbf": ("lbf", "20x20-2p-4f"),
-}
 FIGURES = {
     "returns": "returns_training.png",
     ACC_NEWEST: "action_accuracy_training.png",
@@ -128,7 +123,9 @@ def marl_eval(grid: Grid) -> dict[str, Any]:
     for run in grid.runs:
         if run.status == "missing":
             continue
-        env_name, task = MARL_EVAL_NAMES.get(run.env, (run.env, run.env))
+        known = run.env in registry.env_names()
+        names = registry.env_entry(run.env).marl_eval if known else None
+        env_name, task = names or (run.env, run.env)
         entry: dict[str, Any] = {}
         k = 0
         for rec in run.metrics:
