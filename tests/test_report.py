@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from transam.registry import PAPER_ENVS, PAPER_METHODS
+from transam.registry import PAPER_ENVS, PAPER_METHODS, display
 from transam.report import Report, build_report
 from transam.report.build import fmt_stat
 from transam.report.claims import combine
-from transam.report.load import display, read_pca
+from transam.report.load import read_pca
 from transam.report.stats import (
     bootstrap_ci,
     curve_ci,
