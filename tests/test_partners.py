@@ -20,7 +20,7 @@ OBS_DIMS = {"tag": 16, "spread": 18, "overcooked": 520, "lbf": 18}
 ACTIONS = {"tag": 5, "spread": 5, "overcooked": 6, "lbf": 6}
 # Spread, greedy members: training teams score about -51 to -57 against random play's -71; a
 # random controlled agent gets about -57 to -60 beside two copies of a member, -70.6 beside
-# random partners (manifest). A lazy member (runs off, recipes._spread) scores -95 there.
+# random partners (manifest). A lazy member (runs off, recipes.spread_recipe) scores -95 there.
 SPREAD_SELF_PLAY_MARGIN = 10.0
 SPREAD_PARTNER_MARGIN = 5.0
 

@@ -1,16 +1,20 @@
 """The one registry of environments and agent-modeling methods: every name, and what each
 layer needs to know about it, is here (and nowhere else).
 
-It is a leaf module (stdlib only), so that every layer (envs, partners, models, compose,
-train, report, cli) may look names up without importing another layer, and ``import transam``
-stays free of JAX. The paper's entries name the code that implements them by import path
-(``"module"`` or ``"module:attribute"``), imported on first use; an entry registered from user
-code (:func:`register_env`, :func:`register_method`) may pass the objects themselves.
+Why here, one module below envs/models/partners rather than a registry per layer: an env's
+entry joins its game (envs/), its populations (partners/) and its report metadata, and a
+registry split by layer would name each env once per layer. As a leaf module (stdlib only),
+every layer (envs, partners, models, compose, train, report, cli) may look names up without
+importing another layer, and ``import transam`` stays free of JAX. The paper's entries name
+the code that implements them by import path (``"module"`` or ``"module:attribute"``),
+imported on first use; an entry registered from user code (:func:`register_env`,
+:func:`register_method`) may pass the objects themselves.
 
-Adding a paper game = one game module, one partners module, one entry in :data:`_ENVS` (and
-its name in :data:`EnvName`); adding a method = one model module, one entry in
-:data:`_METHODS` (and its name in :data:`MethodName`). A test checks the Literals against the
-entries.
+Adding a paper game = one game module, one partners module, one ``_paper_env`` entry below
+(and its name in :data:`EnvName`); adding a method = one model module (its ``build_<name>`` in
+:mod:`transam.models`), one ``_paper_method`` entry (and its name in :data:`MethodName`). The
+Literals are the typed names the CLI and configs need; the import-time check below and
+tests/test_registry.py keep them equal to the entries.
 """
 
 from __future__ import annotations
@@ -83,6 +87,9 @@ class EnvEntry:
     """actions in a learned partner's own view (its actor's output size)"""
     features: Ref = None
     """a learned partner's observation features (default: the observation itself)"""
+    recipe: Ref = None
+    """``recipe(split) -> Recipe``: how the shipped learned population is trained
+    (:mod:`transam.partners.recipes`)"""
     marl_eval: tuple[str, str] | None = None
     """(env, task) names in marl-eval exports (default: the name twice)"""
 
@@ -114,7 +121,7 @@ class MethodEntry:
     dropout: bool = False
     """its execution path can apply dropout (``a2c.act_dropout``)"""
     embedding: bool = True
-    """it produces an embedding worth probing (NAM's is a constant)"""
+    """its z is a learned representation, worth probing (NAM's is the one-hot previous action)"""
 
 
 _ENVS: dict[str, EnvEntry] = {}
@@ -223,6 +230,7 @@ def _paper_env(name: EnvName, features: str | None = None, **fields: Any) -> Non
         learned=True,
         partners=f"transam.partners.{name}",
         features=features and f"transam.partners.train:{features}",
+        recipe=f"transam.partners.recipes:{name}_recipe",
         **fields,
     )
 

@@ -193,7 +193,7 @@ def train_recipe(recipe: Recipe, log: Any = print) -> tuple[dict[str, np.ndarray
             if fam.ppo.checkpoints > 1:  # the learning curve, played as the members play
                 checkpoint_returns[label] = curve
             run_members = run.members
-            if run.pick:  # the best agents of the run, in index order (recipes._spread)
+            if run.pick:  # the best agents of the run, in index order (recipes.spread_recipe)
                 from transam.partners.spread import agent_ranks
 
                 ck = run.members[0][1]

@@ -20,7 +20,7 @@ with its six learned entries named by slot key (``rl_a0..2`` where LIAM has IA2C
 
 * ``partners="default"``: LIAM's own predators (:mod:`transam.partners.liam`, the manifest's
   teams);
-* ``partners="heldout"``: our RL predators ``rl_a0..2`` / ``rl_b0..2`` (recipe ``_tag``);
+* ``partners="heldout"``: our RL predators ``rl_a0..2`` / ``rl_b0..2`` (recipe ``tag_recipe``);
 * ``partners="heuristic"`` (:func:`heuristic_population`): a fixed heuristic stand-in per
   slot (:data:`STAND_INS`), chosen so that the 10 teams are 10 different MULTISETS of
   heuristics (predators are interchangeable, so a team is only distinguishable by what it
