@@ -34,7 +34,7 @@ from rich.table import Table
 from transam.jaxcache import enable_compilation_cache
 from transam.train.a2c import init_runner, make_chunk
 from transam.train.config import TrainConfig
-from transam.train.loop import env_and_model
+from transam.train.programs import env_and_model
 
 FREE = {
     "broadcast_in_dim",

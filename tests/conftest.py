@@ -40,8 +40,8 @@ def smoke_grid(tmp_path_factory: pytest.TempPathFactory):
     backend, one run of which was interrupted after its first checkpoint beforehand."""
     from local_data import SMOKE_ARGS
 
-    from transam import grid
     from transam.cli import main
+    from transam.reproduce import grid
     from transam.train.loop import train
 
     out = tmp_path_factory.mktemp("grid") / "smoke"

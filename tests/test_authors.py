@@ -30,8 +30,9 @@ from transam.envs.spread import Config as SpreadConfig
 from transam.partners import authors, learned
 from transam.partners.moves import DOWN, LEFT, RIGHT, UP
 from transam.partners.spread import landmark_agent
+from transam.rundir import RunDirError
 from transam.train.config import A2CConfig, ConfigError, EvalConfig, TrainConfig
-from transam.train.loop import RunDirError, train
+from transam.train.loop import train
 
 REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "authors-spread"
 FORK_TO_OURS = np.asarray([0, RIGHT, LEFT, UP, DOWN])  # fork 1 +x, 2 -x, 3 +y, 4 -y
@@ -389,7 +390,7 @@ def test_train_and_evaluate_with_a_population_directory(
         "partners": str(pop.resolve()),
         "digest": learned.directory_digest(pop),
     }
-    from transam.evaluation import evaluate_run
+    from transam.evaluation.final import evaluate_run
 
     res = evaluate_run(out, episodes=13, partners="train")
     assert res["population_name"] == "spread-authors"

@@ -7,13 +7,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from transam import envs
+from transam import envs, registry
 from transam.compose import make_env
 from transam.envs.core import ControlledEnv, EnvError
 from transam.envs.rollout import make_random_rollout
 
 
-@pytest.fixture(scope="module", params=envs.ENV_NAMES)
+@pytest.fixture(scope="module", params=registry.PAPER_ENVS)
 def env(request: pytest.FixtureRequest) -> ControlledEnv:
     return make_env(request.param)
 
@@ -101,7 +101,7 @@ def test_bad_inputs_raise_clear_errors(env: ControlledEnv) -> None:
 # --- partner populations ------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", envs.ENV_NAMES)
+@pytest.mark.parametrize("name", registry.PAPER_ENVS)
 def test_default_population_is_the_shipped_one(name: str) -> None:
     from transam.partners.learned import load_manifest
 
@@ -116,7 +116,7 @@ def test_default_population_is_the_shipped_one(name: str) -> None:
     assert {s for t in pop.teams for s in t.slots} >= learned
 
 
-@pytest.mark.parametrize("name", envs.ENV_NAMES)
+@pytest.mark.parametrize("name", registry.PAPER_ENVS)
 def test_heldout_population_differs_from_default(name: str) -> None:
     default, heldout = (make_env(name, partners=p).population for p in ("default", "heldout"))
     assert heldout.name == f"{name}-heldout"

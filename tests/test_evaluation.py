@@ -16,22 +16,14 @@ from typing import Any
 import numpy as np
 import pytest
 
-from transam import grid
+from transam.cli import Evaluate
 from transam.compose import make_env
-from transam.evaluation import (
-    Evaluate,
-    balanced_partners,
-    evaluate_run,
-    evaluation_path,
-    linear_probe,
-    load_run_config,
-    pca_2d,
-    population_for,
-    stratified_split,
-)
+from transam.evaluation.final import balanced_partners, evaluate_run, population_for
+from transam.evaluation.probe import linear_probe, pca_2d, stratified_split
 from transam.partners import learned
+from transam.reproduce import grid
+from transam.rundir import evaluation_path, load_run_config, read_metrics, write_json
 from transam.train.config import ConfigError
-from transam.train.loop import read_metrics, write_json
 
 EPISODES = grid.BUDGETS["smoke"].final_episodes  # 26: the grid's own size, compiled once
 

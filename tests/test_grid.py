@@ -6,23 +6,27 @@ import json
 
 import pytest
 
-from transam import envs, grid
+from transam import registry
 from transam.compose import make_env
+from transam.reproduce import grid
 from transam.train.config import ConfigError
-from transam.train.loop import make_plan
+from transam.train.programs import make_plan
 
 
-@pytest.mark.parametrize("name", envs.ENV_NAMES)
+@pytest.mark.parametrize("name", registry.PAPER_ENVS)
 def test_episode_lengths_match_the_environments(name: str) -> None:
-    assert grid.EPISODE_LEN[name] == make_env(name, partners="heuristic").spec.episode_len
+    assert (
+        registry.env_entry(name).episode_len
+        == make_env(name, partners="heuristic").spec.episode_len
+    )
 
 
 @pytest.mark.parametrize("budget", list(grid.BUDGETS))
-@pytest.mark.parametrize("name", envs.ENV_NAMES)
+@pytest.mark.parametrize("name", registry.PAPER_ENVS)
 def test_run_config_evaluates_about_budget_evals_times(budget: str, name: str) -> None:
     b = grid.BUDGETS[budget]
     config = grid.run_config(grid.RunSpec(name, "nam", 3), b, "somewhere")
-    plan = make_plan(config, grid.EPISODE_LEN[name])
+    plan = make_plan(config, registry.env_entry(name).episode_len)
     assert config.seed == 3 and config.total_steps == b.total_steps
     assert config.eval.episodes == b.eval_episodes
     assert config.run_dir == f"somewhere/runs/{name}/nam/seed_3"

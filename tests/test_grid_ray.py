@@ -17,10 +17,10 @@ from local_data import SMOKE_ENVS as ENVS
 from local_data import SMOKE_METHODS as METHODS
 from local_data import SMOKE_SEEDS as SEEDS
 
-from transam import grid
-from transam.grid_ray import connect, run_ray
+from transam.reproduce import grid
+from transam.reproduce.grid_ray import connect, run_ray
+from transam.rundir import read_metrics
 from transam.train.config import ConfigError
-from transam.train.loop import read_metrics
 
 SMOKE = grid.BUDGETS["smoke"]
 
@@ -48,7 +48,7 @@ def run_files(out: Path, spec: grid.RunSpec) -> dict[str, Any]:
 def report_numbers(out: Path) -> dict[str, Any]:
     """results.json without what differs between two grids of the same runs (date, path,
     machine and wall times)."""
-    from transam.report.build import build_report
+    from transam.reproduce.report.build import build_report
 
     results = json.loads((build_report(out).parent / "results.json").read_text())
     for key in ("generated", "compute"):

@@ -1,5 +1,5 @@
 """Run integrity: corrupt checkpoints, non-finite training, a second writer, SIGINT/SIGTERM and
-failed writes (transam.train.rundir and its use by the loop, evaluation and the grid).
+failed writes (transam.rundir and its use by the loop, evaluation and the grid).
 
 Whole runs are NAM on Spread with scripted partners: 16 envs x 5 steps = 80 steps per update,
 25 updates (2,000 steps) per chunk, five chunks. Chunks are that long (a fraction of a second
@@ -26,19 +26,20 @@ import msgpack
 import numpy as np
 import pytest
 
-from transam import grid
+from transam import rundir
 from transam.cli import main
-from transam.train import rundir
-from transam.train.config import A2CConfig, EvalConfig, TrainConfig
-from transam.train.loop import read_metrics, train
-from transam.train.rundir import (
+from transam.reproduce import grid
+from transam.rundir import (
     CheckpointError,
     RunLockedError,
     WriteError,
     checkpoint_bytes,
     read_checkpoint,
+    read_metrics,
     run_lock,
 )
+from transam.train.config import A2CConfig, EvalConfig, TrainConfig
+from transam.train.loop import train
 
 CHUNK_STEPS = 25 * 80
 CHUNKS = 5
@@ -201,7 +202,8 @@ def test_reproduce_records_a_diverged_run_as_failed_and_goes_on(
 
 
 def test_vmapped_seeds_stop_together_naming_the_diverged_seed() -> None:
-    from transam.train.loop import Plan, _nonfinite_message
+    from transam.train.loop import _nonfinite_message
+    from transam.train.programs import Plan
 
     health = {
         "nonfinite": np.array([[False] * 8, [True, True] + [False] * 4 + [True, False]]),
@@ -240,7 +242,7 @@ def test_nonfinite_check_inside_the_chunk() -> None:
 HOLD = """
 import sys, time
 from pathlib import Path
-from transam.train.rundir import run_lock
+from transam.rundir import run_lock
 with run_lock(Path(sys.argv[1]), "test holder"):
     print("locked", flush=True)
     time.sleep(600)
@@ -261,7 +263,7 @@ def test_second_writer_is_refused_and_a_dead_holder_does_not_block(
         with pytest.raises(RunLockedError, match=who):
             train(tiny(out, resume=True))
         with pytest.raises(RunLockedError, match=who):
-            from transam.evaluation import evaluate_run
+            from transam.evaluation.final import evaluate_run
 
             evaluate_run(out, episodes=8)
         with pytest.raises(SystemExit, match=rf"error: .*in use by process {holder.pid}"):

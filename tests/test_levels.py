@@ -99,7 +99,7 @@ def test_memoryless_level_of_constructed_populations() -> None:
 
 def test_report_puts_accuracy_beside_recorded_levels(monkeypatch: pytest.MonkeyPatch) -> None:
     from transam.partners import learned
-    from transam.report import build
+    from transam.reproduce.report import markdown, results
 
     recorded = {"action_ceiling": 0.84, "memoryless_accuracy": 0.53, "majority_rate": 0.26}
     manifests = {"spread": {"default": {"diversity": {**recorded, "population_digest": "abc"}}}}
@@ -110,7 +110,7 @@ def test_report_puts_accuracy_beside_recorded_levels(monkeypatch: pytest.MonkeyP
         return manifests[env]
 
     monkeypatch.setattr(learned, "load_manifest", load)
-    levels = build.partner_levels(["spread", "tag"])
+    levels = results.partner_levels(["spread", "tag"])
     assert levels["spread"] is not None and levels["spread"]["action_ceiling"] == 0.84
     assert levels["tag"] is None
     stat = {"mean": 0.41}
@@ -118,7 +118,7 @@ def test_report_puts_accuracy_beside_recorded_levels(monkeypatch: pytest.MonkeyP
         e: {"transam": {"metrics": {"action_accuracy_newest": stat}, "seeds": [0]}}
         for e in ("spread", "tag")
     }
-    md = "\n".join(build._levels_md(table, levels))
+    md = "\n".join(markdown._levels_md(table, levels))
     assert "| *ceiling E[max π(a|o)]* | 84.0 | not recorded |" in md
     assert "| *memoryless, team-agnostic* | 53.0 | not recorded |" in md
     assert "| **TransAM** (newest) | 41.0 | 41.0 |" in md and "spread abc" in md

@@ -1,4 +1,4 @@
-"""The agent-model contract, checked for every method in ``METHOD_NAMES`` on Spread.
+"""The agent-model contract, checked for every method in ``PAPER_METHODS`` on Spread.
 
 Per method (tiny settings, so each compiles in seconds): the execution path (``step`` with its
 carry) and the training path (``embed_rollout``) agree across an episode boundary; only the
@@ -26,11 +26,13 @@ from local_data import random_rollout
 
 from transam.compose import make_env
 from transam.envs.core import ControlledEnv
-from transam.models import METHOD_NAMES, AgentModel, BaselineConfig, TransAMConfig, make_model
+from transam.models import AgentModel, BaselineConfig, TransAMConfig, make_model
 from transam.models.base import LocalStep, PartnerView
+from transam.registry import PAPER_METHODS
+from transam.rundir import read_metrics
 from transam.train import a2c
 from transam.train.config import A2CConfig, EvalConfig, TrainConfig
-from transam.train.loop import read_metrics, train
+from transam.train.loop import train
 
 TINY_T = TransAMConfig(context=3, width=16, layers=1, heads=2, ff_width=32, dropout=0.0)
 TINY_B = BaselineConfig(hidden=16, embed_dim=16, decoder_hidden=16)
@@ -64,7 +66,7 @@ def _embed_fn(model: AgentModel) -> Any:
     return lambda p, c, xs, _views: model.embed_rollout(p, c, xs)
 
 
-@pytest.mark.parametrize("method", METHOD_NAMES)
+@pytest.mark.parametrize("method", PAPER_METHODS)
 def test_execution_and_training_paths_agree(env: ControlledEnv, data: Any, method: str) -> None:
     model = tiny(env, method)
     params = model.init(jax.random.key(1), env.spec)
@@ -98,7 +100,7 @@ def test_execution_and_training_paths_agree(env: ControlledEnv, data: Any, metho
     np.testing.assert_allclose(fresh[1], zs[25], atol=1e-5)
 
 
-@pytest.mark.parametrize("method", METHOD_NAMES)
+@pytest.mark.parametrize("method", PAPER_METHODS)
 def test_only_the_oracle_execution_path_takes_partner_data(
     env: ControlledEnv, data: Any, method: str
 ) -> None:
@@ -123,7 +125,7 @@ def test_only_the_oracle_execution_path_takes_partner_data(
     assert not np.allclose(z, z2)
 
 
-@pytest.mark.parametrize("method", METHOD_NAMES)
+@pytest.mark.parametrize("method", PAPER_METHODS)
 def test_auxiliary_loss_finite_and_falls(env: ControlledEnv, data: Any, method: str) -> None:
     model = tiny(env, method)
     xs, record = jax.tree.map(lambda a: a[10:30], (data[0], data[2]))  # [20, 8], crosses 25
@@ -179,7 +181,7 @@ def tiny_run(method: str, out: Path) -> TrainConfig:
     )
 
 
-@pytest.mark.parametrize("method", METHOD_NAMES)
+@pytest.mark.parametrize("method", PAPER_METHODS)
 def test_checkpoint_round_trip(env: ControlledEnv, method: str) -> None:
     """A method's parameters, optimiser state and carry survive the checkpoint format (msgpack)
     leaf for leaf (the rest of the runner state is the same for every method)."""

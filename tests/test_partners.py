@@ -13,14 +13,14 @@ from transam.envs.joint import play
 from transam.partners import learned, liam
 from transam.partners.recipes import IMPORTED, Family, Recipe, Run, recipe
 from transam.partners.spread import AUTHORS_HEURISTICS
-from transam.partners.train import FEATURES, PPOConfig, make_train
+from transam.partners.train import PPOConfig, features, make_train
 
 ENVS = ("tag", "spread", "overcooked", "lbf")
 OBS_DIMS = {"tag": 16, "spread": 18, "overcooked": 520, "lbf": 18}
 ACTIONS = {"tag": 5, "spread": 5, "overcooked": 6, "lbf": 6}
 # Spread, greedy members: training teams score about -51 to -57 against random play's -71; a
 # random controlled agent gets about -57 to -60 beside two copies of a member, -70.6 beside
-# random partners (manifest). A lazy member (runs off, recipes._spread) scores -95 there.
+# random partners (manifest). A lazy member (runs off, recipes.spread_recipe) scores -95 there.
 SPREAD_SELF_PLAY_MARGIN = 10.0
 SPREAD_PARTNER_MARGIN = 5.0
 
@@ -44,7 +44,7 @@ def test_manifest_and_weights_agree(env: str) -> None:
     splits = shipped(env)
     assert splits, f"no shipped population for {env}"
     manifest = learned.load_manifest(env)
-    feat_dim = int(FEATURES[env](jnp.zeros(OBS_DIMS[env])).shape[0])
+    feat_dim = int(features(env)(jnp.zeros(OBS_DIMS[env])).shape[0])
     for split in splits:
         entry = manifest[split]
         params = learned.load_params(env, split)

@@ -21,10 +21,10 @@ from flax import struct
 
 from transam.cli import _preset_in, command
 from transam.envs.core import GameSpec, PartnerRecord, Timestep
-from transam.evaluation import load_run_config
 from transam.models.base import LocalStep
 from transam.models.policy import Policy
 from transam.models.transam import TransAM, TransAMConfig, authors_action_loss
+from transam.rundir import load_run_config
 from transam.train import a2c, presets
 from transam.train.config import (
     ADDED_SETTINGS,
@@ -33,7 +33,8 @@ from transam.train.config import (
     EvalConfig,
     TrainConfig,
 )
-from transam.train.loop import _program_key, make_plan, policy_lr
+from transam.train.logs import policy_lr
+from transam.train.programs import make_plan, program_key
 
 EPISODE = 25
 
@@ -526,7 +527,7 @@ def test_anneal_over_anneal_steps_not_the_run() -> None:
     plain = TrainConfig(total_steps=625_000)
     assert policy_lr(plain, a2c.total_updates(plain)) == 0.0
     # The schedule no longer depends on the run length, so runs share one program.
-    assert _program_key(cfg).total_steps == 1 and _program_key(plain).total_steps == 625_000
+    assert program_key(cfg).total_steps == 1 and program_key(plain).total_steps == 625_000
     tx, _ = a2c.make_optimizers(cfg)
     params = {"w": jnp.zeros(())}
     state = tx.init(params)

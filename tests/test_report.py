@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from transam.envs import ENV_NAMES
-from transam.models import METHOD_NAMES
-from transam.report import Report, build_report
-from transam.report.build import fmt_stat
-from transam.report.claims import combine
-from transam.report.load import display, read_pca
-from transam.report.stats import (
+from transam.cli import Report
+from transam.registry import PAPER_ENVS, PAPER_METHODS, display
+from transam.reproduce.report.build import build_report
+from transam.reproduce.report.claims import combine
+from transam.reproduce.report.load import read_pca
+from transam.reproduce.report.markdown import fmt_stat
+from transam.reproduce.report.stats import (
     bootstrap_ci,
     curve_ci,
     difference,
@@ -47,8 +47,8 @@ def write_grid(
     out: Path,
     ret: dict[str, float],
     acc: dict[str, float],
-    envs: Iterable[str] = ENV_NAMES,
-    methods: Iterable[str] = METHOD_NAMES,
+    envs: Iterable[str] = PAPER_ENVS,
+    methods: Iterable[str] = PAPER_METHODS,
     seeds: Iterable[int] = (0, 1, 2),
     absent: Iterable[str] = (),
     unfinished: Iterable[str] = (),
@@ -455,7 +455,7 @@ def test_report_tables_match_results_json(good: tuple[Path, dict[str, Any], str]
         body = md.split(section, 1)[1].split("\n### ", 1)[0]
         header = next(ln for ln in body.splitlines() if ln.startswith("| method |"))
         envs = [c.strip() for c in header.strip("|").split("|")][1:]
-        for method in METHOD_NAMES:
+        for method in PAPER_METHODS:
             row = next(
                 (ln for ln in body.splitlines() if ln.startswith(f"| **{display(method)}** |")),
                 None,

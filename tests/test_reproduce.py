@@ -15,9 +15,9 @@ from local_data import SMOKE_ENVS as ENVS
 from local_data import SMOKE_METHODS as METHODS
 from local_data import SMOKE_SEEDS as SEEDS
 
-from transam import grid
 from transam.cli import main
-from transam.train.loop import read_metrics
+from transam.reproduce import grid
+from transam.rundir import read_metrics
 
 
 @pytest.fixture(scope="module")

@@ -26,10 +26,12 @@ from transam.envs.core import GameSpec, PartnerRecord, Timestep
 from transam.models.base import LocalStep
 from transam.models.policy import Policy
 from transam.models.transam import TransAMConfig
+from transam.rundir import RunDirError, _flag, read_metrics
 from transam.train import a2c
 from transam.train.config import A2CConfig, ConfigError, EvalConfig, TrainConfig
-from transam.train.evaluate import make_evaluate
-from transam.train.loop import RunDirError, _flag, read_metrics, train, uniform_policy_eval
+from transam.train.episodes import make_evaluate
+from transam.train.loop import train
+from transam.train.programs import uniform_policy_eval
 
 # ------------------------------------------------------------------ toy environment and probe
 

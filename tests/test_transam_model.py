@@ -339,7 +339,7 @@ def test_final_evaluation_scores_every_window_position(env: ControlledEnv) -> No
     """The all-positions metric of the final evaluation: K = 1 equals the newest; K = 3 is
     scored and lies in [0, 1]; a pooled model has none."""
     from transam.train.a2c import init_runner
-    from transam.train.evaluate import make_episodes
+    from transam.train.episodes import make_episodes
 
     cfg = TrainConfig(env="spread", method="transam")
     got = {}

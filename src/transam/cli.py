@@ -1,4 +1,5 @@
-"""The ``transam`` command: typed subcommands (tyro), one dataclass each with a ``run`` method."""
+"""The ``transam`` command: every subcommand, one typed dataclass each (tyro) whose ``run``
+method calls the library and prints what it returns. Nothing else defines a subcommand."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import statistics
 import sys
 import time
 from dataclasses import dataclass, fields
+from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import tyro
@@ -15,18 +17,12 @@ from rich.console import Console
 from rich.table import Table
 
 from transam.compose import PartnerChoice
-from transam.evaluation import Evaluate
-from transam.models import METHOD_NAMES
-from transam.partners.cli import Partners
-from transam.report.build import Report
-from transam.train.config import ConfigError, MethodName, TrainConfig
+from transam.registry import PAPER_ENVS, PAPER_METHODS, EnvName, MethodName
+from transam.train.config import ConfigError, TrainConfig
 from transam.train.presets import PRESET_NAMES
 
 PresetName = Literal["none", "authors"]
 
-EnvName = Literal["tag", "spread", "overcooked", "lbf"]
-ALL_ENVS: tuple[EnvName, ...] = ("tag", "spread", "overcooked", "lbf")
-METHODS: tuple[MethodName, ...] = METHOD_NAMES  # type: ignore[assignment]
 
 console = Console()
 _ARGV: list[str] = []  # this invocation's arguments (recorded by `reproduce`)
@@ -54,7 +50,7 @@ class EnvsList:
         for col in ("env", "obs", "acts", "others", "other obs", "other acts", "steps", "teams"):
             table.add_column(col, no_wrap=True, justify="left" if col == "env" else "right")
         notes = []
-        for name in _envs_for(self.partners, ALL_ENVS):
+        for name in _envs_for(self.partners, PAPER_ENVS):
             env = make_env(name, partners=self.partners)
             s = env.spec
             table.add_row(
@@ -85,7 +81,7 @@ class EnvsBench:
     reported (compilation excluded).
     """
 
-    envs: tuple[EnvName, ...] = ALL_ENVS
+    envs: tuple[EnvName, ...] = PAPER_ENVS
     """environments to time"""
     num_envs: int = 1024
     """vmapped environment copies"""
@@ -125,7 +121,7 @@ class EnvsRollout:
     """Roll out every environment with its partner population and a random controlled agent
     (or, on Spread, the landmark rule), and print each partner team's episode returns."""
 
-    envs: tuple[EnvName, ...] = ALL_ENVS
+    envs: tuple[EnvName, ...] = PAPER_ENVS
     """environments to roll out"""
     episodes: int = 20
     """episodes per parallel copy (about episodes x copies / teams per team)"""
@@ -207,10 +203,10 @@ class EnvsRollout:
 def _envs_for(partners: str, envs: tuple[EnvName, ...]) -> tuple[str, ...]:
     """``envs``, or for a population directory only the env its manifest names (it fits no
     other); an unknown ``partners`` value stops with the valid choices."""
-    from transam.compose import PARTNER_CHOICES, check_partners
+    from transam.compose import check_partners, partner_choices
     from transam.partners.learned import read_population_dir
 
-    if check_partners(partners) in PARTNER_CHOICES:
+    if check_partners(partners) in partner_choices():
         return envs
     made_for = read_population_dir(partners).get("env")
     if made_for not in envs:
@@ -278,7 +274,8 @@ class Demo(TrainConfig):
     """start from a named set of settings (as `transam train --preset`)"""
 
     def run(self) -> None:
-        from transam.train.loop import read_metrics, seed_dirs, uniform_policy_eval
+        from transam.rundir import read_metrics, seed_dirs
+        from transam.train.programs import uniform_policy_eval
 
         config = TrainConfig(**{f.name: getattr(self, f.name) for f in fields(TrainConfig)})
         if not _run_train(config):
@@ -304,9 +301,9 @@ class Reproduce:
     """smoke: minutes (a test); small: a few hours on 2 CPU cores; paper: 10M steps x 5 seeds"""
     out: str = "runs/reproduce"
     """grid directory (one budget per directory)"""
-    envs: tuple[EnvName, ...] = ALL_ENVS
+    envs: tuple[EnvName, ...] = PAPER_ENVS
     """environments"""
-    methods: tuple[MethodName, ...] = METHODS
+    methods: tuple[MethodName, ...] = PAPER_METHODS
     """methods"""
     seeds: tuple[int, ...] = ()
     """seeds (default: 0 .. the budget's seed count - 1)"""
@@ -325,10 +322,9 @@ class Reproduce:
     """Ray: retries of a run whose worker or node died (it resumes from its checkpoint)"""
 
     def run(self) -> None:
-        from pathlib import Path
 
-        from transam import grid
-        from transam.report.build import build_report
+        from transam.reproduce import grid
+        from transam.reproduce.report.build import build_report
 
         _check_positive(jobs=self.jobs)
         budget = grid.BUDGETS[self.budget]
@@ -337,7 +333,7 @@ class Reproduce:
         out = Path(self.out)
         address = None if self.address == "local" else self.address
         if self.backend == "ray":  # a missing Ray or a bad address fails before writing
-            from transam.grid_ray import connect
+            from transam.reproduce.grid_ray import connect
 
             connect(address)
         grid.open_grid(out, self.budget, specs, ["transam", *_ARGV])
@@ -347,7 +343,7 @@ class Reproduce:
             f"({budget.total_steps:,} steps each) into {out}/ via {self.backend}"
         )
         if self.backend == "ray":
-            from transam.grid_ray import run_ray
+            from transam.reproduce.grid_ray import run_ray
 
             failures = run_ray(
                 out,
@@ -369,10 +365,401 @@ class Reproduce:
             raise SystemExit(1)
 
 
+EvalPartners = Annotated[str, tyro.conf.arg(metavar="{train,heldout}|DIR")]
+"""``train``, ``heldout`` or a population directory (checked by
+:func:`transam.evaluation.final.population_for`)."""
+
+
+@dataclass(frozen=True)
+class Evaluate:
+    """Evaluate a trained run: return, agent-modeling accuracy and their per-step curves, and a
+    linear probe and projection of the embeddings (writes eval_PARTNERS.json/.png)."""
+
+    run_dir: Annotated[str, tyro.conf.Positional]
+    """run directory (one seed: a multi-seed run's seed_S subdirectory)"""
+    episodes: int = 100
+    """evaluation episodes (run in parallel; partner i mod M for episode i)"""
+    partners: EvalPartners = "train"
+    """the run's training partners, held-out ones it never met, or a population directory
+    (manifest.json + default.safetensors; writes eval_pop-NAME.*)"""
+    checkpoint: str | None = None
+    """checkpoint file name or chunk number (default: the newest)"""
+    seed: int = 0
+    """PRNG seed of the episodes and of the probe's train/test split"""
+
+    def run(self) -> None:
+        from transam.evaluation.final import EVAL_METRICS, evaluate_run
+        from transam.jaxcache import enable_compilation_cache
+        from transam.rundir import evaluation_path, projection_path
+
+        enable_compilation_cache()
+        res = evaluate_run(self.run_dir, self.episodes, self.partners, self.checkpoint, self.seed)
+        table = Table(
+            title=f"{res['env']}/{res['method']} seed {res['seed']}, {res['checkpoint']} "
+            f"(step {res['step']:,}), {res['episodes']} episodes, {res['population_name']}"
+        )
+        table.add_column("metric")
+        table.add_column("value", justify="right")
+        table.add_row("return", f"{res['return']['mean']:.4g} ± {res['return']['std']:.3g}")
+        for key in EVAL_METRICS:
+            if key in res:
+                table.add_row(key.replace("_", " "), f"{res[key]:.4g}")
+        if "probe" in res:
+            acc = res["probe"]["accuracy"]
+            table.add_row("partner probe accuracy", "-" if acc is None else f"{acc:.3f}")
+            table.add_row("probe chance", f"{res['probe']['chance']:.3f}")
+        console.print(table)
+        for note in res["notes"]:
+            console.print(f"note: {note}")
+        path = evaluation_path(self.run_dir, self.partners)
+        console.print(f"wrote {path}, {path.with_suffix('.png')}")
+        if "pca" in res:
+            console.print(f"wrote {projection_path(self.run_dir, self.partners)}")
+
+
+@dataclass
+class Report:
+    """Aggregate a grid directory (the --out of `transam reproduce`) into OUT/report/: tables with
+    95% bootstrap CIs over seeds, the paper's figures, and its claims with computed verdicts."""
+
+    out: tyro.conf.Positional[Path]
+    """the grid directory (holds grid.json and runs/)"""
+
+    def run(self) -> None:
+        import json
+
+        from transam.models.base import ACC_NEWEST
+        from transam.reproduce.report.build import build_report
+
+        path = build_report(self.out)
+        results = json.loads((path.parent / "results.json").read_text())
+        runs = results["runs"]
+        table = Table(title=f"final return, mean [95% CI] ({results['grid']['budget']} budget)")
+        for col in ("env", "method", "seeds", "return", "action acc. (newest)"):
+            table.add_column(col, justify="left" if col in ("env", "method") else "right")
+        for env, cells in results["cells"].items():
+            for method, cell in cells.items():
+                ret, acc = cell["metrics"].get("return"), cell["metrics"].get(ACC_NEWEST)
+                table.add_row(
+                    env,
+                    method,
+                    str(len(cell["seeds"])),
+                    f"{ret['mean']:.2f} [{ret['lo']:.2f}, {ret['hi']:.2f}]" if ret else "-",
+                    f"{100 * acc['mean']:.1f}%" if acc else "-",
+                )
+        console.print(table)
+        verdicts: dict[str, list[str]] = {}
+        for claim in results["claims"]:
+            verdicts.setdefault(claim["verdict"], []).append(claim["key"])
+        for verdict, keys in verdicts.items():
+            console.print(f"claims {verdict}: {', '.join(keys)}")
+        console.print(
+            f"runs: {len(runs['finished'])} finished, {len(runs['unfinished'])} unfinished, "
+            f"{len(runs['missing'])} missing (of {runs['expected']} in grid.json)"
+        )
+        console.print(f"report: {path}")
+        console.print(
+            f"results: {path.parent / 'results.json'}; figures: {path.parent / 'figures'}"
+        )
+
+
+def _partner_split(heldout: bool) -> str:
+    return "heldout" if heldout else "default"
+
+
+@dataclass
+class PartnersTrain:
+    """Regenerate ENV's learned population from scratch (deterministic) into the package data."""
+
+    env: tyro.conf.Positional[EnvName]
+    heldout: bool = False  # train the held-out population instead of the default one
+    steps: int | None = None  # smoke runs: every family gets this budget, 4 envs, 8-step rollouts
+    out: Path | None = None  # write here instead of the package data (use with --steps)
+
+    def run(self) -> None:
+        from transam.partners import learned
+        from transam.partners.recipes import recipe
+
+        if self.steps is not None and self.out is None:
+            raise SystemExit(
+                "error: --steps changes the recipe's budget; pass --out DIR too, so the shipped "
+                f"{self.env} population is not overwritten by a smoke run"
+            )
+        try:
+            r = recipe(self.env, self.heldout)
+        except ValueError as err:
+            raise SystemExit(f"error: {err}") from None
+        if self.steps is not None:
+            r = r.scaled(self.steps)
+        t0 = time.time()
+        tensors, entry = learned.train_recipe(r, log=console.print)
+        path = learned.save(self.env, r.split, tensors, entry, root=self.out)
+        digest = learned.digest(self.env, r.split, root=self.out)
+        console.print(
+            f"trained {len(entry['members'])} members in {time.time() - t0:.1f}s -> {path} "
+            f"(digest {digest})"
+        )
+
+
+@dataclass
+class PartnersShow:
+    """Print ENV's manifest with each member's measured return against its stand-in."""
+
+    env: tyro.conf.Positional[EnvName]
+    heldout: bool = False
+    episodes: int = 128  # episodes per measured number
+
+    def run(self) -> None:
+        from transam.partners import learned
+
+        if self.episodes < 1:
+            raise SystemExit(f"error: --episodes must be at least 1, got {self.episodes}")
+        split = _partner_split(self.heldout)
+        entry = learned.load_manifest(self.env)[split]
+        members = learned.learned_members(self.env, split)
+        measured = learned.measure_members(self.env, entry["members"], members, self.episodes)
+        # Tag: also how often each team of three reaches the prey, and random predators' rate.
+        touches = (
+            learned.measure_members(
+                self.env, entry["members"], members, self.episodes, "touches", True
+            )
+            if self.env == "tag"
+            else {}
+        )
+        digest = learned.digest(self.env, split)
+        table = Table(title=f"{self.env} {split} learned partners (digest {digest})")
+        rows = [
+            {
+                "member": m["name"],
+                "kind": m["kind"],
+                "recipe": m["recipe"],
+                "act": m.get("act", "sample"),
+                # Imported members (LIAM's) have no training metadata: "-", column dropped.
+                "seed": str(m.get("seed", "-")),
+                "shaping": m.get("shaping", "-"),
+                "gamma": f"{m['gamma']:g}" if "gamma" in m else "-",
+                "steps": f"{m['steps']:,}" if "steps" in m else "-",
+                "self-play": f"{m['self_play_return']:.3f}" if "self_play_return" in m else "-",
+                "vs": learned.stand_in_of(m),
+                "measured": f"{measured[m['name']]:.3f}",
+                **({"touches": f"{touches[m['name']]:.2f}"} if touches else {}),
+            }
+            for m in entry["members"]
+        ]
+        cols = [c for c in rows[0] if any(r[c] != "-" for r in rows)]
+        for c in cols:
+            table.add_column(c, justify="left" if c in ("member", "recipe", "vs") else "right")
+        for r in rows:
+            table.add_row(*(r[c] for c in cols))
+        console.print(table)
+        if "source" in entry:
+            src = entry["source"]
+            licence = learned.data_dir(self.env) / src["license_file"]
+            console.print(
+                f"imported from {src['repository']}@{src['commit'][:8]} ({src['license']}, "
+                f"{src['copyright']}; licence in {licence})"
+            )
+        if "random_return" in entry:
+            console.print(f"random play: {entry['random_return']}")
+        if touches:
+            rnd = {k.split("/")[1]: round(v, 2) for k, v in touches.items() if "/" in k}
+            console.print(
+                f"touches: steps per episode with a predator within the capture distance of "
+                f"the prey; random predators: {rnd}"
+            )
+        if entry["teams"]:
+            console.print("teams: " + ", ".join(t["name"] for t in entry["teams"]))
+        console.print(
+            "self-play: the member's training run (manifest); measured: every learner slot "
+            f"played by this member, against the stand-in in column vs ({self.episodes} "
+            "episodes)"
+        )
+
+
+@dataclass
+class PartnersDiversity:
+    """Cross-play matrix (LBF, Overcooked), partner-index classifier accuracy vs chance, and the
+    partners' action-accuracy levels: the ceiling E[max_a pi(a|o)] and the memoryless,
+    team-agnostic level (an MLP from a partner's own observation, pooled over teams)."""
+
+    env: tyro.conf.Positional[EnvName]
+    heldout: bool = False
+    heuristic: bool = False  # the scripted population (partners="heuristic") instead
+    window: int = 10  # steps per classifier sample
+    record: bool = False  # store the results in the shipped manifest (docs/partners.md quotes it)
+
+    def run(self) -> None:
+        from rich.markup import escape
+
+        from transam.compose import make_env
+        from transam.partners import learned
+        from transam.partners.diversity import (
+            ClassifierConfig,
+            LevelsConfig,
+            action_levels,
+            cross_play,
+            diversity_record,
+            partner_id_accuracy,
+        )
+
+        if self.heuristic and (self.heldout or self.record):
+            raise SystemExit(
+                "error: --heuristic measures the scripted population, which has no manifest "
+                "entry: it takes neither --heldout nor --record"
+            )
+        split = "heuristic" if self.heuristic else _partner_split(self.heldout)
+        if self.heuristic:
+            env = make_env(self.env, partners="heuristic")
+        else:
+            env = make_env(self.env, population=learned.population(self.env, split))
+        if not 1 <= self.window <= env.spec.episode_len:
+            raise SystemExit(
+                f"error: --window must be between 1 and {self.env}'s episode length "
+                f"{env.spec.episode_len} (a window stays inside one episode), got {self.window}"
+            )
+        if self.env in ("lbf", "overcooked") and not self.heuristic:
+            members = learned.learned_members(self.env, split)
+            names = list(members)
+            mat = cross_play(self.env, [members[n] for n in names])
+            table = Table(title=f"{self.env} cross-play (row: partner, column: stand-in slot)")
+            table.add_column("partner", no_wrap=True)
+            for j in range(len(names)):
+                table.add_column(str(j), justify="right")
+            for i, (n, row) in enumerate(zip(names, mat, strict=True)):
+                table.add_row(f"{i} {n}", *(f"{x:.2f}" for x in row))
+            console.print(table)
+        acc = partner_id_accuracy(env, ClassifierConfig(window=self.window))
+        console.print(
+            f"{self.env} {split}: partner-index top-1 accuracy from the others' obs+actions "
+            f"{acc['others']:.3f}, from the controlled agent's local trajectory "
+            f"{acc['local']:.3f}, "
+            f"chance {acc['chance']:.3f} ({acc['teams']} teams, window {self.window})"
+        )
+        lv_cfg = LevelsConfig()
+        levels = action_levels(env, lv_cfg)
+        table = Table(title=f"{self.env} {split}: partners' action-accuracy levels")
+        table.add_column("level")
+        table.add_column("value", justify="right")
+        table.add_column("what")
+        table.add_row(
+            "ceiling", f"{levels['ceiling']:.3f}", escape("E[max_a pi(a|o)] under their own obs")
+        )
+        table.add_row(
+            "memoryless",
+            f"{levels['memoryless']:.3f}",
+            "MLP: partner's own obs + slot -> action, pooled over teams (held out)",
+        )
+        table.add_row(
+            "memoryless (own view)",
+            f"{levels['memoryless_own']:.3f}",
+            "the same from the controlled agent's current obs (an agent model without history)",
+        )
+        table.add_row("majority", f"{levels['majority']:.3f}", "each slot's most frequent action")
+        console.print(table)
+        sampled = set(levels["sampled"])
+        console.print(
+            "member ceilings: "
+            + ", ".join(
+                f"{n} {v:.3f}" + ("*" if n in sampled else "") for n, v in levels["members"].items()
+            )
+            + f" (* measured by sampling act {lv_cfg.samples}x per obs; others from their "
+            f"probabilities); {lv_cfg.episodes_per_team} episodes per team, {levels['steps']:,} "
+            "partner steps, random controlled agent"
+        )
+        if self.record:
+            found = diversity_record(self.env, self.heldout, self.window, acc, levels, lv_cfg)
+            learned.record_diversity(self.env, split, found)
+            console.print(f"recorded in {learned.data_dir(self.env) / 'manifest.json'}")
+
+
+@dataclass
+class PartnersImportLiam:
+    """Convert LIAM's six pretrained Tag predators (.npz exports of its .pt files, with its
+    LICENSE) into Tag's default population in the package data."""
+
+    env: tyro.conf.Positional[Literal["tag"]]
+    src: tyro.conf.Positional[Path]  # folder of params_{ia2c,maddpg}_agent_{0,1,2}.npz + LICENSE
+    out: Path | None = None  # write here instead of the package data
+
+    def run(self) -> None:
+        from transam.partners import learned
+        from transam.partners.liam import import_liam
+
+        try:
+            path = import_liam(self.src, root=self.out)
+        except (FileNotFoundError, ValueError) as err:
+            raise SystemExit(f"error: {err}") from None
+        digest = learned.digest(self.env, "default", root=self.out)
+        console.print(f"imported LIAM's predators -> {path} (digest {digest})")
+
+
+@dataclass
+class PartnersImportAuthors:
+    """Import the TransAM authors' Spread population from YOUR checkout of their repository
+    (conor-wallace/agent-transformer) into a population directory --out DIR, for
+    `--partners DIR` / make_env("spread", partners=DIR). Their repository has no licence: the
+    directory is for your own use, never to be redistributed (nothing of theirs ships with
+    transam)."""
+
+    env: tyro.conf.Positional[Literal["spread"]]
+    path: tyro.conf.Positional[Path]
+    """their repository's root (weights under pretrained_opponents/pretrained_parameters/spread/)
+    or a folder holding params_{ippo,mappo}_agent_{0..3}.pt directly"""
+    out: Path
+    """population directory to write (manifest.json + default.safetensors), outside the
+    transam package"""
+
+    def run(self) -> None:
+        from transam.partners import authors, learned
+
+        if self.out.exists() and not self.out.is_dir():
+            raise SystemExit(f"error: --out {self.out} exists and is not a directory")
+        if (
+            self.out.is_dir()
+            and any(self.out.iterdir())
+            and not (self.out / "manifest.json").exists()
+        ):
+            raise SystemExit(
+                f"error: --out {self.out} is a non-empty folder that holds no population "
+                "(manifest.json); choose an empty or new folder"
+            )
+        try:
+            path = authors.import_spread(self.path, self.out)
+        except (FileNotFoundError, ValueError) as err:
+            raise SystemExit(f"error: {err}") from None
+        pop = learned.directory_population("spread", self.out)
+        console.print(
+            f"wrote {path} and {self.out / 'default.safetensors'}: {len(authors.LEARNED)} "
+            f"learned actors (argmax) + {len(authors.MEMBER_LIST[:5])} heuristics, "
+            f"{len(pop.teams)} teams (digest {learned.directory_digest(self.out)})"
+        )
+        console.print(
+            f"use: transam train --partners {self.out} (or make_env('spread', "
+            f"partners='{self.out}')); licence: {authors.LICENCE}"
+        )
+
+
+@dataclass
+class Partners:
+    """Learned partner populations: train, show, diversity, import-liam, import-authors."""
+
+    cmd: (
+        Annotated[PartnersTrain, tyro.conf.subcommand("train")]
+        | Annotated[PartnersImportLiam, tyro.conf.subcommand("import-liam")]
+        | Annotated[PartnersShow, tyro.conf.subcommand("show")]
+        | Annotated[PartnersDiversity, tyro.conf.subcommand("diversity")]
+        | Annotated[PartnersImportAuthors, tyro.conf.subcommand("import-authors")]
+    )
+
+    def run(self) -> None:
+        self.cmd.run()
+
+
 def _run_train(config: TrainConfig) -> bool:
     """Train and print the final evaluation table; True when the run finished."""
+    from transam.rundir import WriteError
     from transam.train.loop import NonFiniteError, train
-    from transam.train.rundir import RunInterrupted, WriteError
+    from transam.train.stop import RunInterrupted
 
     try:
         result = train(config)
@@ -458,7 +845,8 @@ def main(argv: list[str] | None = None) -> None:
     )
     _setup_jax()
     from transam.envs import EnvError
-    from transam.train.rundir import RunInterrupted, WriteError
+    from transam.rundir import WriteError
+    from transam.train.stop import RunInterrupted
 
     try:
         cmd.run()

@@ -10,13 +10,15 @@ Partner populations (``make_env(..., partners=...)``):
   Tag differs: its default population is LIAM's pretrained predators (imported, MIT), its
   held-out one our own learned predators in the same 10-team table.
 * ``"heuristic"``: the scripted population of :mod:`transam.partners.<env>`.
+* any other name an env's registry entry lists in ``populations`` (a user's game, registered
+  with :func:`transam.registry.register_env`, may bring its own ``"default"``).
 * a **population directory** (a path; the choices above take precedence, so write
   ``./default`` for a folder of that name): ``manifest.json`` + ``default.safetensors`` in the
   shipped format (:mod:`transam.partners.learned` describes it), e.g. one written by
   ``transam partners import-authors spread`` or by you.
 
 The learned partners were trained in the default game, so they are offered only for a config
-that equals the default in every field except those in :data:`PARTNER_BLIND_FIELDS` (fields
+that equals the default in every field except its registry entry's ``blind_fields`` (fields
 that change only rewards or the episode length, which the partners' policies never see: they
 act on their own observation alone). Any other change (e.g. LBF's grid size, which changes
 the observation size; Overcooked's ``controlled_slot``, which puts the partner in the seat it
@@ -32,36 +34,44 @@ must be made for this env (the manifest's ``"env"``).
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import os
 from pathlib import Path
 from typing import Annotated, Any
 
 import tyro
 
+from transam import registry
 from transam.envs import ControlledEnv, EnvError, check_config, env_module
 from transam.envs.population import Population
 
-PARTNER_CHOICES: tuple[str, ...] = ("default", "heldout", "heuristic")
 PartnerChoice = Annotated[str, tyro.conf.arg(metavar="{default,heldout,heuristic}|DIR")]
-"""A ``partners`` value: one of :data:`PARTNER_CHOICES` or a population directory's path
+"""A ``partners`` value: one of :func:`partner_choices` or a population directory's path
 (checked by :func:`check_partners`, not by the type)."""
 DIRECTORY_FORMAT = "a population directory (manifest.json + <split>.safetensors, split 'default')"
 
 
-def check_partners(partners: str | os.PathLike[str]) -> str:
-    """``partners`` as a string when it is a choice of :data:`PARTNER_CHOICES` or a population
-    directory; else :class:`EnvError` naming the value, the valid choices and the format."""
+def partner_choices(env: str | None = None) -> tuple[str, ...]:
+    """The named ``partners`` choices of registered env ``env`` (its registry entry's), or of
+    any registered env (the paper's: ``default``, ``heldout``, ``heuristic``)."""
+    entries = [registry.env_entry(env)] if env else map(registry.env_entry, registry.env_names())
+    return tuple(dict.fromkeys(c for e in entries for c in e.partner_choices()))
+
+
+def check_partners(partners: str | os.PathLike[str], env: str | None = None) -> str:
+    """``partners`` as a string when it is a choice of :func:`partner_choices` (of ``env`` when
+    given) or a population directory; else :class:`EnvError` naming the value, the valid
+    choices and the format."""
     from transam.partners.learned import is_population_dir
 
     value = os.fspath(partners)
-    if value in PARTNER_CHOICES or is_population_dir(value):
+    choices = partner_choices(env)
+    if value in choices or is_population_dir(value):
         return value
     why = ""
     if Path(value).is_dir():
         why = f" ({value!r} is a directory without manifest.json)"
     raise EnvError(
-        f"unknown partners {value!r}{why}; valid choices: {', '.join(PARTNER_CHOICES)}, or "
+        f"unknown partners {value!r}{why}; valid choices: {', '.join(choices)}, or "
         f"{DIRECTORY_FORMAT}"
     )
 
@@ -70,20 +80,7 @@ def resolve_partners(partners: str) -> str:
     """A population directory as an absolute path (runs record it, and may be evaluated or
     resumed from another working directory); the named choices unchanged."""
     value = check_partners(partners)
-    return value if value in PARTNER_CHOICES else str(Path(value).resolve())
-
-
-PARTNER_BLIND_FIELDS: dict[str, frozenset[str]] = {
-    "tag": frozenset({"episode_len", "boundary_penalty"}),
-    "spread": frozenset({"reward", "self_collision", "local_ratio", "episode_len"}),
-    "overcooked": frozenset(
-        {"episode_len", "onion_in_pot_reward", "plate_pickup_reward", "soup_pickup_reward"}
-    ),
-    "lbf": frozenset({"penalty", "episode_len"}),
-}
-"""Config fields the shipped learned partners may run with at any value: they change only
-rewards or the episode length (Overcooked's urgency channel means "under 40 steps left" at any
-length). A field not listed here must keep its default for ``partners="default"/"heldout"``."""
+    return value if value in partner_choices() else str(Path(value).resolve())
 
 
 def partner_population(
@@ -95,16 +92,16 @@ def partner_population(
     learned partners were not trained for (naming the fields and the way out).
     """
     config = check_config(name, config)
-    partners = check_partners(partners)
-    if partners == "heuristic":
-        heuristics = importlib.import_module(f"transam.partners.{name}")
-        pop: Population = heuristics.heuristic_population(config)
+    partners = check_partners(partners, name)
+    entry = registry.env_entry(name)
+    if partners in entry.populations:
+        pop: Population = registry.resolve(entry.populations[partners])(config)
         return pop
     from transam.partners import learned
 
     made_for, what, label = type(config)(), "the default game", "default"
     manifest = None
-    if partners not in PARTNER_CHOICES:
+    if partners not in entry.partner_choices():
         try:
             manifest = learned.read_population_dir(partners, name)
         except ValueError as err:
@@ -123,14 +120,14 @@ def partner_population(
     changed = [
         f"{f.name}={getattr(config, f.name)!r} ({label} {getattr(made_for, f.name)!r})"
         for f in dataclasses.fields(config)
-        if f.name not in PARTNER_BLIND_FIELDS[name]
-        and getattr(config, f.name) != getattr(made_for, f.name)
+        if f.name not in entry.blind_fields and getattr(config, f.name) != getattr(made_for, f.name)
     ]
     if changed:
         raise EnvError(
             f"partners {partners!r} of env {name!r} are learned in {what} and do not "
             f"fit this config ({', '.join(changed)}); pass partners='heuristic' (valid choices: "
-            f"{', '.join(PARTNER_CHOICES)}, or {DIRECTORY_FORMAT}) or a population of your own"
+            f"{', '.join(entry.partner_choices())}, or {DIRECTORY_FORMAT}) or a population of "
+            "your own"
         )
     try:
         if manifest is not None:

@@ -20,7 +20,7 @@ import numpy as np
 
 from transam.train.a2c import init_runner, make_update, steps_per_update
 from transam.train.config import A2CConfig, TrainConfig
-from transam.train.loop import env_and_model
+from transam.train.programs import env_and_model
 
 
 def advantage_by_phase(time_feature: bool, updates: int, seed: int) -> np.ndarray:

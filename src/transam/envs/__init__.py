@@ -1,16 +1,17 @@
 """The paper's four environments as controlled-agent JAX games (dynamics only).
 
-Each module defines a ``Config``, a :class:`Game` and ``make_env(config, population)``. Partner
-populations live in :mod:`transam.partners` (which may import this package, never the
-reverse); :func:`transam.make_env` composes a game with its population. Modules are imported
-lazily so that using one environment does not pay for the others' imports.
+Their names and modules are entries of :mod:`transam.registry`. Each module defines a
+``Config``, a :class:`Game` and ``make_env(config, population)``. Partner populations live in
+:mod:`transam.partners` (which may import this package, never the reverse);
+:func:`transam.make_env` composes a game with its population. Modules are imported lazily so
+that using one environment does not pay for the others' imports.
 """
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
+from transam import registry
 from transam.envs.core import (
     ControlledEnv,
     EnvError,
@@ -21,10 +22,7 @@ from transam.envs.core import (
     Timestep,
 )
 
-ENV_NAMES: tuple[str, ...] = ("tag", "spread", "overcooked", "lbf")
-
 __all__ = [
-    "ENV_NAMES",
     "ControlledEnv",
     "EnvError",
     "EnvState",
@@ -39,14 +37,20 @@ __all__ = [
 
 
 def env_module(name: str) -> Any:
-    if name not in ENV_NAMES:
-        raise EnvError(f"unknown environment {name!r}; valid choices: {', '.join(ENV_NAMES)}")
-    return importlib.import_module(f"transam.envs.{name}")
+    """The game of registered environment ``name``: its ``Config`` and ``make_env``."""
+    return _entry(name).module()
 
 
 def config_class(name: str) -> type:
     """The typed configuration dataclass of environment ``name``."""
-    return env_module(name).Config
+    return _entry(name).config_class()
+
+
+def _entry(name: str) -> registry.EnvEntry:
+    try:
+        return registry.env_entry(name)
+    except registry.RegistryError as err:
+        raise EnvError(str(err)) from None
 
 
 def check_config(name: str, config: Any) -> Any:

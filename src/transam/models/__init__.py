@@ -1,11 +1,12 @@
 """Agent models (TransAM, its ablations and the baselines) behind one protocol; see
-:mod:`transam.models.base`. Every method is built by :func:`make_model` from its name."""
+:mod:`transam.models.base`. Every method is built by :func:`make_model` from its name
+(its entry in :mod:`transam.registry` names its ``build_*`` function here)."""
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 
+from transam import registry
 from transam.envs.core import EnvError, GameSpec
 from transam.models.base import AgentModel, LocalStep, PartnerView
 from transam.models.cail import CAIL
@@ -18,43 +19,54 @@ from transam.models.pel import PEL
 from transam.models.transam import TransAM, TransAMConfig
 
 __all__ = [
-    "METHOD_NAMES",
     "AgentModel",
     "BaselineConfig",
     "LocalStep",
     "PartnerView",
     "TransAMConfig",
+    "build_cail",
+    "build_carl",
+    "build_liam",
+    "build_nam",
+    "build_oracle",
+    "build_pel",
+    "build_transam",
     "make_model",
 ]
 
-Factory = Callable[[GameSpec, TransAMConfig, BaselineConfig], AgentModel]
+
+def build_transam(
+    spec: GameSpec, transformer: TransAMConfig, baseline: BaselineConfig, **ablation: str
+) -> AgentModel:
+    """TransAM, or an ablation with its settings (its imitation decoder sized as CAIL's)."""
+    config = dataclasses.replace(transformer, **ablation)  # type: ignore[arg-type]
+    return TransAM(spec=spec, config=config, decoder_hidden=baseline.decoder_hidden)
 
 
-def _transformer(**ablation: str) -> Factory:
-    """TransAM with an ablation's settings (its imitation decoder sized as CAIL's)."""
-
-    def build(spec: GameSpec, t: TransAMConfig, b: BaselineConfig) -> AgentModel:
-        config = dataclasses.replace(t, **ablation)  # type: ignore[arg-type]
-        return TransAM(spec=spec, config=config, decoder_hidden=b.decoder_hidden)
-
-    return build
+def build_nam(spec: GameSpec, transformer: TransAMConfig, baseline: BaselineConfig) -> AgentModel:
+    return NAM(num_actions=spec.num_actions)
 
 
-_FACTORIES: dict[str, Factory] = {
-    "transam": _transformer(),
-    "nam": lambda spec, t, b: NAM(num_actions=spec.num_actions),
-    "oracle": lambda spec, t, b: Oracle(spec=spec),  # type: ignore[dict-item,return-value]
-    "liam": lambda spec, t, b: LIAM(spec=spec, config=b),
-    "carl": lambda spec, t, b: CARL(spec=spec, config=b),
-    "cail": lambda spec, t, b: CAIL(spec=spec, config=b),
-    "pel": lambda spec, t, b: PEL(spec=spec, config=t, baseline=b),
-    "transam-fuse": _transformer(tokens="fuse"),
-    "transam-pool": _transformer(pool="mean"),
-    "transam-im": _transformer(decoder="imitate"),
-}
-"""Every method by name: the paper's order is TransAM, baselines, ablations."""
+def build_oracle(
+    spec: GameSpec, transformer: TransAMConfig, baseline: BaselineConfig
+) -> AgentModel:
+    return Oracle(spec=spec)  # type: ignore[return-value]
 
-METHOD_NAMES: tuple[str, ...] = tuple(_FACTORIES)
+
+def build_liam(spec: GameSpec, transformer: TransAMConfig, baseline: BaselineConfig) -> AgentModel:
+    return LIAM(spec=spec, config=baseline)
+
+
+def build_carl(spec: GameSpec, transformer: TransAMConfig, baseline: BaselineConfig) -> AgentModel:
+    return CARL(spec=spec, config=baseline)
+
+
+def build_cail(spec: GameSpec, transformer: TransAMConfig, baseline: BaselineConfig) -> AgentModel:
+    return CAIL(spec=spec, config=baseline)
+
+
+def build_pel(spec: GameSpec, transformer: TransAMConfig, baseline: BaselineConfig) -> AgentModel:
+    return PEL(spec=spec, config=transformer, baseline=baseline)
 
 
 def make_model(
@@ -63,8 +75,14 @@ def make_model(
     transformer: TransAMConfig | None = None,
     baseline: BaselineConfig | None = None,
 ) -> AgentModel:
-    """The agent model ``method`` for environment ``spec``; ``transformer`` configures the
-    transformer encoders (TransAM, its ablations, PEL), ``baseline`` the others."""
-    if method not in _FACTORIES:
-        raise EnvError(f"unknown method {method!r}; valid choices: {', '.join(METHOD_NAMES)}")
-    return _FACTORIES[method](spec, transformer or TransAMConfig(), baseline or BaselineConfig())
+    """The agent model ``method`` (a name in :mod:`transam.registry`) for environment ``spec``;
+    ``transformer`` configures the transformer encoders (TransAM, its ablations, PEL),
+    ``baseline`` the others."""
+    try:
+        entry = registry.method_entry(method)
+    except registry.RegistryError as err:
+        raise EnvError(str(err)) from None
+    model: AgentModel = registry.resolve(entry.factory)(
+        spec, transformer or TransAMConfig(), baseline or BaselineConfig(), **entry.options
+    )
+    return model

@@ -27,7 +27,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import flax.linen as nn
@@ -38,6 +38,7 @@ import optax
 
 from transam.envs.core import ControlledEnv
 from transam.envs.population import Member, Population
+from transam.partners import learned
 from transam.partners.train import apply
 
 
@@ -347,4 +348,35 @@ def action_levels(env: ControlledEnv, cfg: LevelsConfig | None = None) -> dict[s
         "memoryless_own": own["accuracy"],
         "majority": memoryless["majority"],
         "steps": int(steps.live.sum()) * steps.obs.shape[2],
+    }
+
+
+def diversity_record(
+    env: str,
+    heldout: bool,
+    window: int,
+    acc: dict[str, Any],
+    levels: dict[str, Any],
+    lv_cfg: LevelsConfig,
+) -> dict[str, Any]:
+    """What ``transam partners diversity ENV --record`` stores in the shipped manifest (the
+    README and the report quote it): the classifier accuracies of
+    :func:`partner_id_accuracy` and the levels of :func:`action_levels`, rounded."""
+    split = "heldout" if heldout else "default"
+    return {
+        "partner_id_accuracy_others": round(acc["others"], 3),
+        "partner_id_accuracy_local": round(acc["local"], 3),
+        "chance": round(acc["chance"], 4),
+        "teams": acc["teams"],
+        "window": window,
+        "episodes_per_team": ClassifierConfig().episodes_per_team,
+        "action_ceiling": round(levels["ceiling"], 4),
+        "memoryless_accuracy": round(levels["memoryless"], 4),
+        "memoryless_own_accuracy": round(levels["memoryless_own"], 4),
+        "majority_rate": round(levels["majority"], 4),
+        "member_ceilings": {n: round(v, 4) for n, v in levels["members"].items()},
+        "ceiling_sampled": levels["sampled"],
+        "levels_settings": asdict(lv_cfg),
+        "measured_by": f"transam partners diversity {env}" + (" --heldout" if heldout else ""),
+        "population_digest": learned.digest(env, split),
     }

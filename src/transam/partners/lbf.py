@@ -38,6 +38,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from transam.envs.joint import JointView
 from transam.envs.lbf import EAST, LOAD, NONE, NORTH, SOUTH, WEST, Config, split_obs
 from transam.envs.population import Member, PolicyFn, Population, Team
 
@@ -130,6 +131,20 @@ def heuristic_members(config: Config) -> tuple[Member, ...]:
         Member("random", random_policy(config)),
         Member("lazy", lazy_policy(config)),
     )
+
+
+def heuristic_pool() -> dict[str, Member]:
+    """The heuristic members a manifest's teams may name, by name (default game)."""
+    return {m.name: m for m in heuristic_members(Config())}
+
+
+def joint_view(stand_in: str = "self-play", score: str = "shaped") -> JointView:
+    """The training view of all agents in the default game (every agent learns: no stand-in,
+    one score)."""
+    del stand_in, score
+    from transam.envs.lbf import joint_view as lbf_view
+
+    return lbf_view(Config())
 
 
 def heuristic_population(config: Config) -> Population:

@@ -37,6 +37,7 @@ import numpy as np
 from flax.traverse_util import flatten_dict, unflatten_dict
 from safetensors.numpy import load_file, save_file
 
+from transam import registry
 from transam.envs.joint import JointView, play
 from transam.envs.population import Member, PolicyFn, Population, Team
 from transam.partners import liam
@@ -67,28 +68,17 @@ def data_dir(env: str) -> Path:
 
 def joint_view(env: str, stand_in: str = "self-play", tag_score: str = "shaped") -> JointView:
     """The training view of ``env`` with its default config (Tag: the named prey stand-in,
-    scored by ``tag_score``, see :func:`transam.envs.tag.joint_view`)."""
-    if env == "tag":
-        from transam.envs import tag
-        from transam.partners.tag import PREY_STAND_INS
+    scored by ``tag_score``, see :func:`transam.partners.tag.joint_view`), from its partners
+    module (its registry entry's ``partners``)."""
+    view: JointView = _partners_module(env).joint_view(stand_in, tag_score)
+    return view
 
-        if stand_in not in PREY_STAND_INS:
-            valid = ", ".join(PREY_STAND_INS)
-            raise ValueError(f"unknown Tag prey stand-in {stand_in!r}; valid choices: {valid}")
-        return tag.joint_view(tag.Config(), PREY_STAND_INS[stand_in], tag_score)
-    if env == "spread":
-        from transam.envs import spread
 
-        return spread.SpreadGame(spread.Config()).joint_view()
-    if env == "overcooked":
-        from transam.envs import overcooked
-
-        return overcooked.OvercookedGame(overcooked.Config()).joint_view()
-    if env == "lbf":
-        from transam.envs import lbf
-
-        return lbf.joint_view(lbf.Config())
-    raise ValueError(f"unknown environment {env!r}")
+def _partners_module(env: str) -> Any:
+    module = registry.resolve(registry.env_entry(env).partners)
+    if module is None:
+        raise ValueError(f"environment {env!r} has no partners module (its registry entry)")
+    return module
 
 
 def random_policy(num_actions: int) -> PolicyFn:
@@ -203,7 +193,7 @@ def train_recipe(recipe: Recipe, log: Any = print) -> tuple[dict[str, np.ndarray
             if fam.ppo.checkpoints > 1:  # the learning curve, played as the members play
                 checkpoint_returns[label] = curve
             run_members = run.members
-            if run.pick:  # the best agents of the run, in index order (recipes._spread)
+            if run.pick:  # the best agents of the run, in index order (recipes.spread_recipe)
                 from transam.partners.spread import agent_ranks
 
                 ck = run.members[0][1]
@@ -406,8 +396,8 @@ def directory_digest(path: str | Path) -> str:
 def population_digest(env: str, partners: str) -> str | None:
     """The fingerprint of the population ``make_env(env, partners=partners)`` plays:
     :func:`digest` of a shipped split, :func:`directory_digest` of a population directory;
-    None for the scripted ``"heuristic"`` one (code, not data)."""
-    if partners == "heuristic":
+    None for one built by code (``"heuristic"``, a registry entry's ``populations``)."""
+    if partners in registry.env_entry(env).populations:
         return None
     if partners in SPLITS:
         return digest(env, partners)
@@ -419,8 +409,7 @@ MemberBuilder = Callable[[dict[str, Any], dict[str, Any], str], LogitsFn]
 
 
 def _mlp_logits(params: dict[str, Any], entry: dict[str, Any], env: str) -> LogitsFn:
-    view_actions = {"tag": 5, "spread": 5, "overcooked": 6, "lbf": 6}[env]
-    return make_logits(params, env, view_actions, entry["hidden"])
+    return make_logits(params, env, registry.env_entry(env).partner_actions, entry["hidden"])
 
 
 ARCHITECTURES: dict[str, MemberBuilder] = {
@@ -483,23 +472,9 @@ def learned_members(
 
 
 def heuristic_pool(env: str) -> dict[str, Member]:
-    """The environment's heuristic members, by name."""
-    if env == "tag":
-        from transam.partners.tag import HEURISTICS
-
-        return {m.name: m for m in HEURISTICS}
-    if env == "spread":
-        from transam.partners.spread import heuristic_members
-
-        return {m.name: m for m in heuristic_members()}
-    if env == "overcooked":
-        from transam.partners.overcooked import heuristic_members as oc
-
-        return {m.name: m for m in oc()}
-    from transam.envs.lbf import Config
-    from transam.partners.lbf import heuristic_members as lb
-
-    return {m.name: m for m in lb(Config())}
+    """The environment's heuristic members, by name (none without a partners module)."""
+    module = registry.resolve(registry.env_entry(env).partners)
+    return {} if module is None else dict(module.heuristic_pool())
 
 
 def population(

@@ -66,6 +66,7 @@ from transam.envs.overcooked import (
 from transam.envs.population import Member, PolicyFn, Population, Team
 
 if TYPE_CHECKING:
+    from transam.envs.joint import JointView
     from transam.envs.overcooked import Config
 
 NUM_CELLS = HEIGHT * WIDTH
@@ -293,6 +294,20 @@ def heuristic_members(eps: float = 0.05) -> list[Member]:
         Member("idle", idle),
         Member("random", uniform_random),
     ]
+
+
+def heuristic_pool() -> dict[str, Member]:
+    """The heuristic members a manifest's teams may name, by name."""
+    return {m.name: m for m in heuristic_members()}
+
+
+def joint_view(stand_in: str = "self-play", score: str = "shaped") -> JointView:
+    """The training view of both agents in the default game (both learn: no stand-in, one
+    score)."""
+    del stand_in, score
+    from transam.envs import overcooked as game
+
+    return game.OvercookedGame(game.Config()).joint_view()
 
 
 def heuristic_population(config: Config | None = None) -> Population:

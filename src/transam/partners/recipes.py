@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from transam import registry
 from transam.partners.tag import LIAM_TABLE
 from transam.partners.train import PPOConfig
 
@@ -84,7 +85,7 @@ class Recipe:
 TAG_PPO = PPOConfig(total_steps=750_000, num_envs=32, rollout_len=50)
 
 
-def _tag(split: str) -> Recipe:
+def tag_recipe(split: str) -> Recipe:
     """Tag's held-out population: six learned predators, rl_a0-2 (IPPO vs a fleeing prey, with a
     5x entropy bonus: loose, stochastic chasers) and rl_b0-2 (MAPPO vs a random prey: tight
     chasers), in LIAM's 10-team table where LIAM has its IA2C (rl_a<i>) and MADDPG (rl_b<i>)
@@ -151,7 +152,7 @@ def spread_teams(heuristics: tuple[str, ...]) -> tuple[tuple[str, tuple[str, ...
     return tuple((f"{a}+{b}", (a, b)) for a, b in rows)
 
 
-def _spread(split: str) -> Recipe:
+def spread_recipe(split: str) -> Recipe:
     """The authors' population structure on our trainer: eight greedy (``act: argmax``, as
     their actors) MLP actors, ``ippo_0-3`` from two IPPO self-play runs and ``mappo_0-3`` from
     two MAPPO runs (two of the three agents of each run, see ``pick``; final checkpoint of
@@ -197,7 +198,7 @@ def _spread(split: str) -> Recipe:
 OVERCOOKED_PPO = PPOConfig(total_steps=160_000, num_envs=16, rollout_len=100, ent_coef=0.02)
 
 
-def _overcooked(split: str) -> Recipe:
+def overcooked_recipe(split: str) -> Recipe:
     """8 PPO partners (agent_1; agent_0 is the self-play stand-in): onion specialists (shaped
     only for onions, their training partner only for plates and soups), dish specialists (the
     reverse) and generalists (both cooks fully shaped), over seeds.
@@ -231,7 +232,7 @@ def _overcooked(split: str) -> Recipe:
 LBF_PPO = PPOConfig(total_steps=160_000, num_envs=32, rollout_len=50, lr=1e-3, ent_coef=0.01)
 
 
-def _lbf(split: str) -> Recipe:
+def lbf_recipe(split: str) -> Recipe:
     """10 members from IPPO and MAPPO self-play pairs over seeds and discounts (0.99 down to
     0.5: the low ones are myopic); both agents of a run become members (the observation is
     observer-relative, so either net fits the partner slot)."""
@@ -252,8 +253,6 @@ def _lbf(split: str) -> Recipe:
     return Recipe("lbf", split, fams, tuple(runs), teams)
 
 
-BUILDERS = {"tag": _tag, "spread": _spread, "overcooked": _overcooked, "lbf": _lbf}
-
 IMPORTED: dict[tuple[str, str], str] = {
     ("tag", "default"): (
         "Tag's default population is LIAM's pretrained predators, imported, not trained: "
@@ -267,6 +266,8 @@ IMPORTED: dict[tuple[str, str], str] = {
 def recipe(env: str, heldout: bool = False) -> Recipe:
     """The recipe of ``env``'s default (or held-out) learned population; an imported split
     (:data:`IMPORTED`) has none and raises ValueError saying how it is made."""
-    if env not in BUILDERS:
-        raise ValueError(f"unknown environment {env!r}; valid: {', '.join(BUILDERS)}")
-    return BUILDERS[env]("heldout" if heldout else "default")
+    build = registry.resolve(registry.env_entry(env).recipe)
+    if build is None:
+        raise ValueError(f"environment {env!r} has no learned-population recipe (registry)")
+    recipe: Recipe = build("heldout" if heldout else "default")
+    return recipe

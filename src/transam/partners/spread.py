@@ -137,6 +137,20 @@ def heuristic_members() -> list[Member]:
     return [Member(name, fn) for name, fn in {**HEURISTICS, **AUTHORS_HEURISTICS}.items()]
 
 
+def heuristic_pool() -> dict[str, Member]:
+    """The heuristic members a manifest's teams may name, by name."""
+    return {m.name: m for m in heuristic_members()}
+
+
+def joint_view(stand_in: str = "self-play", score: str = "shaped") -> JointView:
+    """The training view of all agents in the default game (every agent learns: no stand-in,
+    one score)."""
+    del stand_in, score
+    from transam.envs.spread import SpreadGame
+
+    return SpreadGame(Config()).joint_view()
+
+
 def heuristic_population(config: Config | None = None) -> Population:
     """The heuristic Spread population (``partners="heuristic"``): the module doc's 13 teams."""
     del config  # the heuristics read observations only; no option changes them

@@ -20,7 +20,7 @@ with its six learned entries named by slot key (``rl_a0..2`` where LIAM has IA2C
 
 * ``partners="default"``: LIAM's own predators (:mod:`transam.partners.liam`, the manifest's
   teams);
-* ``partners="heldout"``: our RL predators ``rl_a0..2`` / ``rl_b0..2`` (recipe ``_tag``);
+* ``partners="heldout"``: our RL predators ``rl_a0..2`` / ``rl_b0..2`` (recipe ``tag_recipe``);
 * ``partners="heuristic"`` (:func:`heuristic_population`): a fixed heuristic stand-in per
   slot (:data:`STAND_INS`), chosen so that the 10 teams are 10 different MULTISETS of
   heuristics (predators are interchangeable, so a team is only distinguishable by what it
@@ -42,6 +42,7 @@ from transam.envs.population import Member, PolicyFn, Population, Team
 from transam.partners.moves import DOWN, LEFT, RIGHT, UP, move_toward
 
 if TYPE_CHECKING:
+    from transam.envs.joint import JointView
     from transam.envs.tag import Config
 
 PRED_A, PRED_B, PREY_REL = slice(8, 10), slice(10, 12), slice(12, 14)
@@ -148,6 +149,23 @@ def liam_population(
         Team(f"liam{i}", tuple(fill.get(s, s) for s in row)) for i, row in enumerate(LIAM_TABLE)
     ]
     return Population(name, members, teams)
+
+
+def heuristic_pool() -> dict[str, Member]:
+    """The heuristic members a manifest's teams may name, by name."""
+    return {m.name: m for m in HEURISTICS}
+
+
+def joint_view(stand_in: str, score: str = "shaped") -> JointView:
+    """The training view of all agents in the default game, the prey played by the named
+    stand-in (:data:`PREY_STAND_INS`) and scored by ``score`` (see
+    :func:`transam.envs.tag.joint_view`)."""
+    from transam.envs import tag
+
+    if stand_in not in PREY_STAND_INS:
+        valid = ", ".join(PREY_STAND_INS)
+        raise ValueError(f"unknown Tag prey stand-in {stand_in!r}; valid choices: {valid}")
+    return tag.joint_view(tag.Config(), PREY_STAND_INS[stand_in], score)
 
 
 def heuristic_population(config: Config | None = None) -> Population:

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from transam import registry
 from transam.envs.joint import JointView
 from transam.envs.population import PolicyFn, ProbsFn
 
@@ -109,18 +110,17 @@ def overcooked_features(obs: jax.Array) -> jax.Array:
     return grid.at[..., 20].multiply(1.0 / 20.0).reshape(-1)
 
 
-FEATURES: dict[str, FeatureFn] = {
-    "tag": identity_features,
-    "spread": identity_features,
-    "overcooked": overcooked_features,
-    "lbf": lbf_features,
-}
+def features(view_name: str) -> FeatureFn:
+    """A learned partner's observation features in env ``view_name`` (its registry entry's
+    ``features``; the observation itself by default)."""
+    feat: FeatureFn = registry.resolve(registry.env_entry(view_name).features) or identity_features
+    return feat
 
 
 def make_logits(params: Params, view_name: str, num_actions: int, hidden: int) -> LogitsFn:
     """The actor's logits as a function of one observation, closing over ``params``."""
     net = MLP(hidden, num_actions)
-    feat = FEATURES[view_name]
+    feat = features(view_name)
     params = jax.tree.map(jnp.asarray, params)
     return lambda obs: apply(net, params, feat(obs))
 
@@ -173,7 +173,7 @@ def make_train(
     episode length (an on-policy estimate of the episode return).
     """
     A, E, T = view.num_agents, cfg.num_envs, cfg.rollout_len
-    feat = FEATURES[view.name]
+    feat = features(view.name)
     actor = MLP(cfg.hidden, view.num_actions)
     critic = MLP(cfg.hidden, 1)
     fdim = int(feat(jnp.zeros(view.obs_dim)).shape[0])

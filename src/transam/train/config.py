@@ -12,30 +12,17 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from transam import registry
 from transam.compose import PartnerChoice, check_partners
-from transam.envs import ENV_NAMES, EnvError
-from transam.models import METHOD_NAMES, BaselineConfig, TransAMConfig
+from transam.envs import EnvError
+from transam.models import BaselineConfig, TransAMConfig
+from transam.registry import EnvName, MethodName
 
-EnvName = Literal["tag", "spread", "overcooked", "lbf"]
-MethodName = Literal[
-    "transam",
-    "nam",
-    "oracle",
-    "liam",
-    "carl",
-    "cail",
-    "pel",
-    "transam-fuse",
-    "transam-pool",
-    "transam-im",
-]
 SeedMode = Literal["vmap", "sequential"]
 AdvantageForm = Literal["gae", "recomputed"]
 ValueLossForm = Literal["half_squared", "squared"]
 EndBootstrap = Literal["zero", "return_mean"]
 PolicyInit = Literal["orthogonal", "torch"]
-DROPOUT_METHODS = ("transam", "transam-fuse", "transam-pool", "transam-im")
-"""Methods whose execution path can apply dropout (``a2c.act_dropout``)."""
 
 
 class ConfigError(EnvError):
@@ -185,10 +172,10 @@ class TrainConfig:
 
     def validate(self) -> TrainConfig:
         """Raise :class:`ConfigError` for the first bad value; return ``self`` when all is well."""
-        _choice("env", self.env, ENV_NAMES)
-        _choice("method", self.method, METHOD_NAMES)
+        _choice("env", self.env, registry.env_names())
+        _choice("method", self.method, registry.method_names())
         try:
-            check_partners(self.partners)
+            check_partners(self.partners, self.env)
         except EnvError as err:
             raise ConfigError(str(err)) from None
         _choice("seed_mode", self.seed_mode, ("vmap", "sequential"))
@@ -218,9 +205,10 @@ class TrainConfig:
                 "a2c.end_bootstrap 'return_mean' needs a2c.normalize_returns (the running "
                 "mean it bootstraps from)"
             )
-        if a.act_dropout and self.method not in DROPOUT_METHODS:
+        dropout = [m for m in registry.method_names() if registry.method_entry(m).dropout]
+        if a.act_dropout and self.method not in dropout:
             raise ConfigError(
-                f"a2c.act_dropout applies to the methods {', '.join(DROPOUT_METHODS)}; "
+                f"a2c.act_dropout applies to the methods {', '.join(dropout)}; "
                 f"got method {self.method!r}"
             )
         m = self.model

@@ -16,15 +16,10 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from transam.report.load import METHOD_ORDER, RunData, display
-from transam.train.loop import write_atomic
+from transam.registry import display, env_title, method_entry, method_names
+from transam.reproduce.report.load import METHOD_ORDER, RunData
+from transam.rundir import write_atomic
 
-ENV_TITLE = {
-    "tag": "Tag (predator-prey)",
-    "spread": "Spread (cooperative navigation)",
-    "overcooked": "Overcooked (cramped room)",
-    "lbf": "LBF (level-based foraging)",
-}
 FONT: Any = {  # (Any: matplotlib types rc keys as a Literal)
     "font.size": 11,
     "axes.titlesize": 12,
@@ -41,12 +36,14 @@ def _style(method: str) -> dict[str, Any]:
 
     i = METHOD_ORDER.index(method) if method in METHOD_ORDER else len(METHOD_ORDER)
     color = mpl.colormaps["tab10"](i % 10)
-    width = 2.2 if method == "transam" else 1.5
+    kind = method_entry(method).kind if method in method_names() else None
+    ablation, main = kind == "ablation", kind == "main"
+    width = 2.2 if main else 1.5
     return {
         "color": color,
-        "linestyle": "--" if "-" in method else "-",
+        "linestyle": "--" if ablation else "-",
         "linewidth": width,
-        "zorder": 3 if method == "transam" else 2,  # TransAM on top
+        "zorder": 3 if main else 2,  # TransAM on top
     }
 
 
@@ -107,7 +104,7 @@ def training_curves(
                 if metric in c["curves"]:
                     curve = c["curves"][metric]
                     _band(ax, curve["step"], curve, display(method), **_style(method))
-            ax.set_title(ENV_TITLE.get(env, env))
+            ax.set_title(env_title(env))
             ax.set_xlabel("environment steps (controlled agent)")
             ax.set_ylabel(ylabel)
             ax.grid(alpha=0.3)
@@ -158,7 +155,7 @@ def episode_evolution(table: dict[str, dict[str, Any]], method: str, path: Path)
                     )
                 if i == 0:
                     seeds = max(max(c["n"]) for c in per_step.values() if c["n"])
-                    ax.set_title(f"{ENV_TITLE.get(env, env)} (n={seeds})")
+                    ax.set_title(f"{env_title(env)} (n={seeds})")
                 if i == len(rows) - 1:
                     ax.set_xlabel("timestep in episode")
                 if j == 0:
@@ -191,7 +188,7 @@ def probe_curves(table: dict[str, dict[str, Any]], path: Path) -> Path | None:
                         chances.append(c["probe_chance"])
             if chances:
                 ax.axhline(np.mean(chances), color="black", linestyle=":", label="chance")
-            ax.set_title(ENV_TITLE.get(env, env))
+            ax.set_title(env_title(env))
             ax.set_xlabel("timestep in episode")
             ax.set_ylabel("partner probe accuracy")
             ax.grid(alpha=0.3)
@@ -229,7 +226,7 @@ def pca_scatter(runs: list[RunData], method: str, path: Path) -> Path | None:
                 f"PC{i + 1}" + (f" ({100 * ev[i]:.0f}% var.)" if ev and len(ev) > i else "")
                 for i in range(2)
             ]
-            ax.set_title(f"{ENV_TITLE.get(env, env)}, seed {run.seed}")
+            ax.set_title(f"{env_title(env)}, seed {run.seed}")
             ax.set_xlabel(pc[0])
             ax.set_ylabel(pc[1])
             ax.grid(alpha=0.3)

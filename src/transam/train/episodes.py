@@ -1,11 +1,13 @@
-"""Evaluation: N episodes in parallel, one per environment copy.
+"""Evaluation episodes: the rollout of N episodes in parallel, one per environment copy, that
+both the evaluation during training (:func:`make_evaluate`, every chunk) and the final
+evaluation of a run (:mod:`transam.evaluation`, ``transam evaluate``) play.
 
 Each copy plays exactly one episode (``episode_len`` steps; steps after an early termination
 are masked out). Actions are sampled from the policy by default: A2C trains a stochastic policy
 and the reference code evaluates it as it acts; ``greedy=True`` takes the argmax instead.
 With ``a2c.act_dropout`` the agent model keeps its dropout on here too, as the reference
 evaluates. Partners are drawn uniformly during training (as the training episodes draw
-them); the final evaluation (:mod:`transam.evaluation`) passes one partner index per
+them); the final evaluation passes one partner index per
 episode instead.
 
 For a model with a decoder, every step also scores ``decode(z_t, o^{-1}_t)`` against the step's

@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from transam.report.load import ENV_ORDER, METHOD_ORDER, Grid, RunData, order_key
-from transam.report.stats import curve_ci, interval, stratified_bootstrap
+from transam.reproduce.report.load import ENV_ORDER, METHOD_ORDER, Grid, RunData, order_key
+from transam.reproduce.report.stats import curve_ci, interval, stratified_bootstrap
 
 ACC_NEWEST, ACC_ALL = "action_accuracy_newest", "action_accuracy_all_positions"
 EVAL_METRICS = ("return", ACC_NEWEST, ACC_ALL, "obs_mse", "obs_mse_all_positions")
@@ -30,7 +30,7 @@ SOURCE_EVAL = "final evaluation"
 SOURCE_TRAIN = "last training evaluation"
 
 
-def _number(x: Any) -> float | None:
+def number(x: Any) -> float | None:
     """A finite float from a number or a {"mean": ...} entry, else None."""
     if isinstance(x, dict):
         x = x.get("mean")
@@ -70,16 +70,16 @@ def run_finals(run: RunData) -> dict[str, tuple[float, str]]:
         return out
     ev, last = run.evals.get("train"), run.final or {}
     for metric in EVAL_METRICS:
-        value = _number(ev.get(metric)) if ev else None
+        value = number(ev.get(metric)) if ev else None
         if value is not None:
             out[metric] = (value, SOURCE_EVAL)
-        elif ev is None and (v := _number(last.get(f"eval/{metric}"))) is not None:
+        elif ev is None and (v := number(last.get(f"eval/{metric}"))) is not None:
             out[metric] = (v, SOURCE_TRAIN)
     held = run.evals.get("heldout")
-    if held and (v := _number(held.get("return"))) is not None:
+    if held and (v := number(held.get("return"))) is not None:
         out["heldout_return"] = (v, SOURCE_EVAL)
     probe = ev.get("probe") if ev else None
-    if isinstance(probe, dict) and (v := _number(probe.get("accuracy"))) is not None:
+    if isinstance(probe, dict) and (v := number(probe.get("accuracy"))) is not None:
         out["probe_accuracy"] = (v, SOURCE_EVAL)
     per_step = (ev or {}).get("per_step") or {}
     for metric in (ACC_NEWEST, "obs_mse"):
@@ -112,7 +112,7 @@ def _training_curve(runs: list[RunData], key: str) -> dict[str, Any] | None:
         pts = {
             int(r["step"]): v
             for r in run.metrics
-            if isinstance(r.get("step"), int) and (v := _number(r.get(key))) is not None
+            if isinstance(r.get("step"), int) and (v := number(r.get(key))) is not None
         }
         if pts:
             series.append(pts)
@@ -149,15 +149,15 @@ def cell(runs: list[RunData]) -> dict[str, Any]:
             sources = sorted({src for _, (_, src) in have})
             out["metrics"][metric]["source"] = sources[0] if len(sources) == 1 else "mixed"
     stds = [
-        _number(r.evals["train"]["return"].get("std"))
+        number(r.evals["train"]["return"].get("std"))
         if "train" in r.evals
-        else _number((r.final or {}).get("eval/return_std"))
+        else number((r.final or {}).get("eval/return_std"))
         for r in finished
     ]
     stds_ok = [s for s in stds if s is not None]
     out["episode_return_std"] = float(np.mean(stds_ok)) if stds_ok else None
     chances = [
-        _number(r.evals["train"]["probe"].get("chance"))
+        number(r.evals["train"]["probe"].get("chance"))
         for r in finished
         if isinstance(r.evals.get("train", {}).get("probe"), dict)
     ]

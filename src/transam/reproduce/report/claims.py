@@ -33,7 +33,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from transam.report.stats import difference, interval
+from transam.registry import PAPER_ENVS, PAPER_METHODS, methods_of
+from transam.reproduce.report.stats import difference, interval
 
 Relation = Literal["better", "not_worse", "similar"]
 Verdict = Literal["holds", "does not hold", "inconclusive", "not run"]
@@ -61,9 +62,11 @@ METRIC_LABEL = {
     "trend:action_accuracy_newest": "action accuracy (newest), late - early in the episode",
     "trend:obs_mse": "obs. MSE, late - early in the episode",
 }
-BASELINES = ("nam", "liam", "carl", "cail", "pel")
+BASELINES = methods_of("baseline")
 """The non-Oracle baselines of the paper."""
-ALL_ENVS = ("tag", "spread", "overcooked", "lbf")
+ALL_ENVS = PAPER_ENVS
+NOT_ABLATIONS = tuple(m for m in PAPER_METHODS if m not in methods_of("ablation"))
+"""TransAM, the Oracle and the baselines, in the paper's order (Figure 3's methods)."""
 
 
 @dataclass(frozen=True)
@@ -136,7 +139,7 @@ CLAIMS: tuple[Claim, ...] = (
         "“PEL yields the lowest returns in most environments.”",
         "§5.3.1 Task Returns (Fig. 3)",
         ALL_ENVS,
-        _beats("return", ("transam", "nam", "oracle", "liam", "carl", "cail"), "pel"),
+        _beats("return", tuple(m for m in NOT_ABLATIONS if m != "pel"), "pel"),
         across=3,
     ),
     Claim(
@@ -352,7 +355,7 @@ def evaluate_check(check: Check, cells: dict[str, Any]) -> dict[str, Any] | None
 
 def evaluate_claims(cells: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
     """Every claim's verdict, per environment and overall, with the numbers behind it
-    (``cells``: env -> method -> aggregated cell, see :mod:`transam.report.build`)."""
+    (``cells``: env -> method -> aggregated cell, see :func:`~.aggregate.cells`)."""
     results = []
     for claim in CLAIMS:
         per_env: dict[str, Any] = {}

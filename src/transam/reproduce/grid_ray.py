@@ -1,10 +1,10 @@
 """The reproduction grid on a Ray cluster: one Ray task per (env, method, seed) run.
 
-Each task calls :func:`transam.grid.run_one`, which is idempotent, so fault tolerance is only
-a matter of calling it again: when a worker process or a node dies, Ray re-runs the task
-(``max_retries`` times) on a live worker, and run_one resumes that run from its last
-checkpoint; finished runs are skipped. Rerunning the whole command after a crash of the driver
-or the cluster resumes the grid the same way.
+Each task calls :func:`transam.reproduce.grid.run_one`, which is idempotent, so fault
+tolerance is only a matter of calling it again: when a worker process or a node dies, Ray
+re-runs the task (``max_retries`` times) on a live worker, and run_one resumes that run from
+its last checkpoint; finished runs are skipped. Rerunning the whole command after a crash of
+the driver or the cluster resumes the grid the same way.
 
 Retries. A task whose worker process or node dies is retried, up to ``max_retries`` times
 (out-of-memory kills by Ray's memory monitor follow Ray's own retry policy). Of the exceptions
@@ -32,7 +32,7 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from transam.grid import EVAL_PARTNERS, Budget, RunSpec, run_one
+from transam.reproduce.grid import EVAL_PARTNERS, Budget, RunSpec, run_one
 from transam.train.config import ConfigError
 
 RAY_MISSING = "Ray is not installed: pip install 'transam[ray]'"
@@ -58,7 +58,7 @@ def run_ray(
     cluster at ``address`` ("auto": the one ``ray start`` started or RAY_ADDRESS names;
     "HOST:PORT" or "ray://HOST:PORT"; None or "local": a new instance on this machine). A
     process already connected to Ray (``ray.init`` called before) uses that connection.
-    Returns the failed runs, as :func:`transam.grid.run_local` does."""
+    Returns the failed runs, as :func:`transam.reproduce.grid.run_local` does."""
     try:
         import ray
     except ImportError as err:
@@ -166,7 +166,7 @@ def _run(
     gpus_per_run: float,
     max_retries: int,
 ) -> list[str]:
-    from transam.train.loop import write_json
+    from transam.rundir import write_json
 
     marker = out / "log" / f"ray_driver_{uuid.uuid4().hex}.json"
     marker.parent.mkdir(parents=True, exist_ok=True)
@@ -205,7 +205,7 @@ def _describe(err: Exception) -> str:
 
 def _check_outputs(out: Path, spec: RunSpec) -> str:
     """'' when the run's outputs are all in --out as this machine sees it, else why not."""
-    from transam.evaluation import evaluation_path
+    from transam.rundir import evaluation_path
 
     run_dir = out / spec.rel
     missing = [

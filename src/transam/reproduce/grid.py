@@ -27,16 +27,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from transam.envs import ENV_NAMES
-from transam.models import METHOD_NAMES
+from transam import registry
 from transam.train.config import ConfigError, EvalConfig, TrainConfig
 
 BudgetName = Literal["smoke", "small", "paper"]
 EVAL_PARTNERS: tuple[Literal["train", "heldout"], ...] = ("train", "heldout")
-
-# Controlled-agent steps per episode (make_env(...).spec.episode_len), so a grid can be planned
-# without building environments; checked against the environments in the tests.
-EPISODE_LEN = {"tag": 50, "spread": 25, "overcooked": 400, "lbf": 50}
 
 
 @dataclass(frozen=True)
@@ -88,7 +83,10 @@ class RunSpec:
 
 def grid_specs(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int]) -> list[RunSpec]:
     """The runs of a grid in a fixed order (env, method, seed), after checking the names."""
-    for what, values, valid in (("env", envs, ENV_NAMES), ("method", methods, METHOD_NAMES)):
+    for what, values, valid in (
+        ("env", envs, registry.env_names()),
+        ("method", methods, registry.method_names()),
+    ):
         for v in values:
             if v not in valid:
                 raise ConfigError(f"unknown {what} {v!r}; valid choices: {', '.join(valid)}")
@@ -101,7 +99,9 @@ def grid_specs(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int]
 
 def run_config(spec: RunSpec, budget: Budget, out: str | Path) -> TrainConfig:
     """The training configuration of one grid run: the reference settings plus the budget."""
-    every = max(1, round(budget.total_steps / (budget.evals * EPISODE_LEN[spec.env])))
+    # the registry's episode length: a grid is planned without building environments
+    episode_len = registry.env_entry(spec.env).episode_len
+    every = max(1, round(budget.total_steps / (budget.evals * episode_len)))
     return TrainConfig(
         env=spec.env,  # type: ignore[arg-type]
         method=spec.method,  # type: ignore[arg-type]
@@ -124,7 +124,7 @@ def _log(out: Path, spec: RunSpec, event: dict[str, Any]) -> None:
 
 def read_launches(out: str | Path, spec: RunSpec) -> list[dict[str, Any]]:
     """The launch events of one run (see :func:`run_one`)."""
-    from transam.train.loop import read_metrics
+    from transam.rundir import read_metrics
 
     return read_metrics(Path(out) / "log" / f"{spec.name}.jsonl")
 
@@ -132,9 +132,9 @@ def read_launches(out: str | Path, spec: RunSpec) -> list[dict[str, Any]]:
 def run_one(out: str | Path, spec: RunSpec, budget: Budget) -> dict[str, Any]:
     """Train (or resume, or skip) one grid run, then evaluate it on the training and held-out
     partners where not done yet. Safe to call again after any failure; returns a summary."""
-    from transam.evaluation import evaluate_run, evaluation_path
+    from transam.evaluation.final import evaluate_run
+    from transam.rundir import checkpoints, evaluation_path
     from transam.train.loop import train
-    from transam.train.rundir import checkpoints
 
     out = Path(out)
     config = run_config(spec, budget, out)
@@ -189,7 +189,7 @@ def open_grid(out: Path, budget_name: str, specs: list[RunSpec], argv: list[str]
     """Create or extend ``grid.json``; a grid directory keeps one budget."""
     if budget_name not in BUDGETS:
         raise ConfigError(f"unknown budget {budget_name!r}; valid choices: {', '.join(BUDGETS)}")
-    from transam.train.loop import write_json
+    from transam.rundir import write_json
 
     path = out / "grid.json"
     if path.exists():
@@ -220,7 +220,7 @@ def open_grid(out: Path, budget_name: str, specs: list[RunSpec], argv: list[str]
 
 def close_grid(out: Path, failures: list[str]) -> None:
     """Stamp the end time (and failures) of this invocation into grid.json."""
-    from transam.train.loop import write_json
+    from transam.rundir import write_json
 
     path = out / "grid.json"
     grid = json.loads(path.read_text())

@@ -1,4 +1,4 @@
-"""Reading a grid directory (see :mod:`transam.grid`) without trusting it to be complete.
+"""Reading a grid directory (see :mod:`transam.reproduce.grid`) without trusting it to be complete.
 
 Every file is optional: a run may be missing, unfinished (no final.json), or finished but not
 yet evaluated (no eval_*.json); a file being written by another process may be torn. Each run
@@ -19,42 +19,22 @@ from typing import Any, Literal
 
 import numpy as np
 
-from transam.envs import ENV_NAMES
-from transam.models import METHOD_NAMES
+from transam import registry
 from transam.models.base import LEGACY_METRICS
+from transam.rundir import evaluation_path, projection_path, read_metrics
 from transam.train.config import ConfigError
-from transam.train.loop import read_metrics
 
 # The paper's order.
-ENV_ORDER: tuple[str, ...] = ENV_NAMES
-METHOD_ORDER: tuple[str, ...] = METHOD_NAMES
+ENV_ORDER: tuple[str, ...] = registry.PAPER_ENVS
+METHOD_ORDER: tuple[str, ...] = registry.PAPER_METHODS
 PARTNERS = ("train", "heldout")
-DISPLAY = {
-    "transam": "TransAM",
-    "nam": "NAM",
-    "oracle": "Oracle",
-    "liam": "LIAM",
-    "carl": "CARL",
-    "cail": "CAIL",
-    "pel": "PEL",
-    "transam-fuse": "TransAM-fuse",
-    "transam-pool": "TransAM-pool",
-    "transam-im": "TransAM-im",
-}
-
-
-def display(method: str) -> str:
-    """The paper's name of a method."""
-    return DISPLAY.get(method, method)
-
-
 Status = Literal["missing", "unfinished", "finished"]
 
 
 @dataclass(frozen=True)
 class Projection:
     """An evaluation's 2-D PCA of the embeddings (eval_{partners}_pca.npz of
-    :mod:`transam.evaluation`)."""
+    :mod:`transam.evaluation.final`)."""
 
     coords: np.ndarray
     """(N, 2)"""
@@ -102,7 +82,7 @@ def order_key(order: tuple[str, ...]) -> Any:
 
 def parse_rel(rel: str) -> tuple[str, str, int] | None:
     """``runs/ENV/METHOD/seed_S`` -> (env, method, seed), or None for anything else."""
-    from transam.grid import spec_from_rel
+    from transam.reproduce.grid import spec_from_rel
 
     try:
         spec = spec_from_rel(rel)
@@ -184,12 +164,13 @@ def read_run(out: Path, rel: str) -> RunData | None:
         run.final = renamed(first) if isinstance(first, dict) and first else None
         run.final = run.final or (run.metrics[-1] if run.metrics else None)
     for partners in PARTNERS:
-        ev = _read_json(d / f"eval_{partners}.json", run.problems)
+        path = evaluation_path(d, partners)
+        ev = _read_json(path, run.problems)
         if isinstance(ev, dict) and isinstance(ev.get("return"), dict):
             run.evals[partners] = renamed_eval(ev)
         elif ev is not None:
-            run.problems.append(f"eval_{partners}.json: no 'return' entry")
-        npz = d / f"eval_{partners}_pca.npz"
+            run.problems.append(f"{path.name}: no 'return' entry")
+        npz = projection_path(d, partners)
         if npz.exists():
             pca = read_pca(npz)
             if pca is None:

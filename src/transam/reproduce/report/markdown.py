@@ -1,48 +1,18 @@
-"""``transam report OUT``: aggregate a grid directory into OUT/report/.
-
-Writes ``results.json`` (every aggregated number and the claims), ``marl_eval.json`` (the raw
-data format of InstaDeep's marl-eval), ``figures/*.png`` (the paper's figures) and
-``report.md`` (commands, budget, compute, tables, figures, the paper's claims with computed
-verdicts). Works on a partial grid: what is missing is listed, never fatal.
+"""report.md: the results of a grid (:mod:`~transam.reproduce.report.results`) as markdown
+tables, figures and the paper's claims with their computed verdicts. Only formatting: every
+number comes from results.json.
 """
 
 from __future__ import annotations
 
-import datetime as dt
-import shlex
-from collections import Counter
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-import tyro
+from transam.registry import display
+from transam.reproduce.report import claims
+from transam.reproduce.report.aggregate import ACC_ALL, ACC_NEWEST, SOURCE_EVAL
+from transam.reproduce.report.load import METHOD_ORDER
+from transam.reproduce.report.results import CI_METHOD, FIGURES, Table
 
-from transam.report import aggregate, claims
-from transam.report.aggregate import SOURCE_EVAL
-from transam.report.load import METHOD_ORDER, Grid, display, load_grid
-from transam.report.stats import CONFIDENCE, RESAMPLES, RNG_SEED
-from transam.train.loop import write_atomic, write_json
-
-Table = dict[str, dict[str, dict[str, Any]]]
-
-CI_METHOD = " ".join(
-    (
-        f"{CONFIDENCE:.0%} percentile bootstrap over seeds: the seeds of each (env, method) are",
-        f"resampled with replacement {RESAMPLES:,} times (numpy RNG seed {RNG_SEED}), the mean",
-        "is recomputed for each resample, and the interval runs from the 2.5th to the 97.5th",
-        "percentile of those means. Where several environments enter one number (the",
-        "aggregates) the bootstrap is stratified: seeds are resampled within each environment,",
-        "as rliable does. rliable itself is not installable next to this stack, so this is a",
-        "numpy implementation of the same method (checked against scipy.stats.bootstrap in the",
-        "tests). A claim compares two methods with the bootstrap CI of the difference of their",
-        "means (each side's seeds resampled independently). With one seed the interval is the",
-        "point itself (marked n=1); with 2-3 seeds a bootstrap interval is crude (with 2 seeds",
-        "it is roughly the range of the two values, and it is narrower than a t-interval) and",
-        "claims resting on it are weak evidence either way.",
-    )
-)
-
-ACC_NEWEST, ACC_ALL = aggregate.ACC_NEWEST, aggregate.ACC_ALL
 METRIC_TITLE = {
     "return": "return",
     "heldout_return": "return",
@@ -70,19 +40,6 @@ ACCURACY_NOTE = (
     "accuracy of about 64% gives about 86% over all positions). Observation MSE likewise: "
     "`obs_mse` is the newest position's."
 )
-MARL_EVAL_NAMES = {
-    "tag": ("mpe", "simple_tag"),
-    "spread": ("mpe", "simple_spread"),
-    "overcooked": ("overcooked", "cramped_room"),
-    "lbf": ("lbf", "20x20-2p-4f"),
-}
-FIGURES = {
-    "returns": "returns_training.png",
-    ACC_NEWEST: "action_accuracy_training.png",
-    "episode": "transam_episode.png",
-    "probe": "probe_per_step.png",
-    "pca": "transam_pca.png",
-}
 
 
 # ---------------------------------------------------------------- formatting
@@ -109,16 +66,6 @@ def fmt_stat(metric: str, s: dict[str, Any], usual_n: int | None = None) -> str:
     if s.get("source", SOURCE_EVAL) != SOURCE_EVAL:
         text += " †"
     return text
-
-
-def _usual_n(table: Table) -> int | None:
-    ns = [
-        c["metrics"]["return"]["n"]
-        for env in table.values()
-        for c in env.values()
-        if "return" in c["metrics"]
-    ]
-    return Counter(ns).most_common(1)[0][0] if ns else None
 
 
 def _cell_text(table: Table, env: str, method: str, metric: str, usual_n: int | None) -> str:
@@ -177,27 +124,6 @@ def _episode_std_table(table: Table) -> list[str]:
 
 # ---------------------------------------------------------------- partner levels
 
-LEVEL_KEYS = ("action_ceiling", "memoryless_accuracy", "majority_rate")
-"""What ``transam partners diversity --record`` stores about the partners' actions."""
-
-
-def partner_levels(envs: list[str], split: str = "default") -> dict[str, dict[str, Any] | None]:
-    """Per env, the accuracy levels recorded in its shipped manifest's ``split`` entry
-    (``diversity``: ceiling, memoryless level, majority rate, digest), or None when the
-    manifest has none (not recorded, or no shipped population)."""
-    from transam.partners.learned import load_manifest
-
-    out: dict[str, dict[str, Any] | None] = {}
-    for env in envs:
-        try:
-            found = load_manifest(env)[split].get("diversity") or {}
-        except (FileNotFoundError, KeyError, ValueError):
-            found = {}
-        ok = all(isinstance(found.get(k), int | float) for k in LEVEL_KEYS)
-        keep = (*LEVEL_KEYS, "memoryless_own_accuracy", "population_digest", "measured_by")
-        out[env] = {k: found.get(k) for k in keep} if ok else None
-    return out
-
 
 def _levels_md(table: Table, levels: dict[str, dict[str, Any] | None]) -> list[str]:
     """Each method's newest-position accuracy beside its env's partner levels."""
@@ -245,79 +171,9 @@ def _levels_md(table: Table, levels: dict[str, dict[str, Any] | None]) -> list[s
 # ---------------------------------------------------------------- sections
 
 
-def _runs_summary(grid: Grid) -> dict[str, Any]:
-    by = lambda status: [r.rel for r in grid.runs if r.status == status]
-    finished = [r for r in grid.runs if r.status == "finished"]
-    return {
-        "expected": len(grid.expected),
-        "found": len(grid.runs),
-        "finished": by("finished"),
-        "unfinished": by("unfinished"),
-        "missing": by("missing"),
-        "not_evaluated_train": [r.rel for r in finished if "train" not in r.evals],
-        "not_evaluated_heldout": [r.rel for r in finished if "heldout" not in r.evals],
-        "not_in_grid_json": [r.rel for r in grid.runs if r.rel not in grid.expected],
-        "problems": {r.rel: r.problems for r in grid.runs if r.problems},
-    }
-
-
-def _compute(grid: Grid) -> dict[str, Any]:
-    invocations = [i for i in grid.info.get("invocations", []) if isinstance(i, dict)]
-    machines: list[dict[str, Any]] = []
-    for inv in invocations:
-        m = inv.get("machine")
-        if isinstance(m, dict) and m not in machines:
-            machines.append(m)
-    walls = [float(i["wall_s"]) for i in invocations if isinstance(i.get("wall_s"), int | float)]
-    return {
-        "commands": [shlex.join(str(a) for a in i["argv"]) for i in invocations if i.get("argv")],
-        "invocations": len(invocations),
-        "invocations_without_end": sum(1 for i in invocations if i.get("ended") is None),
-        "invocations_with_end": len(walls),
-        "wall_seconds": sum(walls),
-        "run_seconds_from_logs": grid.launch_seconds,
-        "failures": [f for i in invocations for f in (i.get("failures") or [])],
-        "machines": machines,
-    }
-
-
 def _hms(seconds: float) -> str:
     s = round(seconds)
     return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
-
-
-def marl_eval(grid: Grid) -> dict[str, Any]:
-    """marl-eval's raw data: env -> task -> algorithm -> run -> step_k {step_count, return
-    [...]} and absolute_metrics. metrics.jsonl keeps the mean over an evaluation's episodes,
-    not every episode, so each list holds that one mean."""
-    data: dict[str, Any] = {}
-    for run in grid.runs:
-        if run.status == "missing":
-            continue
-        env_name, task = MARL_EVAL_NAMES.get(run.env, (run.env, run.env))
-        entry: dict[str, Any] = {}
-        k = 0
-        for rec in run.metrics:
-            ret = aggregate._number(rec.get("eval/return"))
-            if ret is None or not isinstance(rec.get("step"), int):
-                continue
-            step = {"step_count": rec["step"], "return": [ret]}
-            acc = aggregate._number(rec.get(f"eval/{ACC_NEWEST}"))
-            if acc is not None:
-                step[ACC_NEWEST] = [acc]
-            entry[f"step_{k}"] = step
-            k += 1
-        finals = aggregate.run_finals(run)
-        if finals:
-            entry["absolute_metrics"] = {
-                m: [finals[m][0]]
-                for m in ("return", ACC_NEWEST, ACC_ALL, "heldout_return")
-                if m in finals
-            }
-        if entry:
-            algo = data.setdefault(env_name, {}).setdefault(task, {}).setdefault(run.method, {})
-            algo[f"run_{run.seed}"] = entry
-    return data
 
 
 def _claims_md(results: list[dict[str, Any]]) -> list[str]:
@@ -505,7 +361,7 @@ def render(results: dict[str, Any], table: Table) -> str:
         "### Spread ablation (paper Table 1)",
         "",
     ]
-    ablation = ["transam", "transam-pool", "transam-fuse", "transam-im"]
+    ablation = ["transam", "transam-pool", "transam-fuse", "transam-im"]  # Table 1's rows
     spread = table.get("spread", {})
     rows = [
         [
@@ -633,117 +489,3 @@ def render(results: dict[str, Any], table: Table) -> str:
         "",
     ]
     return "\n".join(lines)
-
-
-# ---------------------------------------------------------------- entry point
-
-
-def build_report(out: Path, draw: bool = True) -> Path:
-    """Aggregate the grid in ``out`` into ``out/report/``; returns the path of report.md.
-    ``draw=False`` skips the figures (the slow part; for tests of the numbers)."""
-    from transam.report import figures  # matplotlib: imported only when a report is built
-
-    out = Path(out)
-    grid = load_grid(out)
-    table = aggregate.cells(grid)
-    report_dir = out / "report"
-    fig_dir = report_dir / "figures"
-    drawn: dict[str, str] = {}
-    plans = {
-        "returns": lambda p: figures.training_curves(
-            table, "return", "evaluation return", "Return during training", p
-        ),
-        ACC_NEWEST: lambda p: figures.training_curves(
-            table,
-            ACC_NEWEST,
-            "action accuracy (newest position)",
-            "Action reconstruction accuracy during training",
-            p,
-        ),
-        "episode": lambda p: figures.episode_evolution(table, "transam", p),
-        "probe": lambda p: figures.probe_curves(table, p),
-        "pca": lambda p: figures.pca_scatter(grid.runs, "transam", p),
-    }
-    for key, plot in plans.items():
-        path = fig_dir / FIGURES[key]
-        if draw and plot(path) is not None:
-            drawn[key] = f"figures/{FIGURES[key]}"
-        else:
-            path.unlink(missing_ok=True)  # not drawn: no stale figure from an earlier build
-    results = {
-        "generated": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
-        "grid": {
-            "out": str(out),
-            "budget": grid.info.get("budget", "unknown"),
-            "budget_settings": grid.info.get("budget_settings", {}),
-        },
-        "compute": _compute(grid),
-        "runs": _runs_summary(grid),
-        "statistics": {
-            "ci": "percentile bootstrap over seeds",
-            "confidence": CONFIDENCE,
-            "resamples": RESAMPLES,
-            "rng_seed": RNG_SEED,
-            "std": "across seeds, ddof 1",
-            "description": CI_METHOD,
-        },
-        "usual_seeds": _usual_n(table),
-        "cells": table,
-        "aggregates": aggregate.aggregates(table),
-        "partner_levels": partner_levels(list(table)),
-        "claims": claims.evaluate_claims(table),
-        "figures": drawn,
-    }
-    report_dir.mkdir(parents=True, exist_ok=True)
-    write_json(report_dir / "results.json", results)
-    write_json(report_dir / "marl_eval.json", marl_eval(grid))
-    path = report_dir / "report.md"
-    write_atomic(path, render(results, table).encode())
-    return path
-
-
-@dataclass
-class Report:
-    """Aggregate a grid directory (the --out of `transam reproduce`) into OUT/report/: tables with
-    95% bootstrap CIs over seeds, the paper's figures, and its claims with computed verdicts."""
-
-    out: tyro.conf.Positional[Path]
-    """the grid directory (holds grid.json and runs/)"""
-
-    def run(self) -> None:
-        import json
-
-        from rich.console import Console
-        from rich.table import Table
-
-        console = Console()
-        path = build_report(self.out)
-        results = json.loads((path.parent / "results.json").read_text())
-        runs = results["runs"]
-        table = Table(title=f"final return, mean [95% CI] ({results['grid']['budget']} budget)")
-        for col in ("env", "method", "seeds", "return", "action acc. (newest)"):
-            table.add_column(col, justify="left" if col in ("env", "method") else "right")
-        for env, cells in results["cells"].items():
-            for method, cell in cells.items():
-                ret, acc = cell["metrics"].get("return"), cell["metrics"].get(ACC_NEWEST)
-                table.add_row(
-                    env,
-                    method,
-                    str(len(cell["seeds"])),
-                    f"{ret['mean']:.2f} [{ret['lo']:.2f}, {ret['hi']:.2f}]" if ret else "-",
-                    f"{100 * acc['mean']:.1f}%" if acc else "-",
-                )
-        console.print(table)
-        verdicts: dict[str, list[str]] = {}
-        for claim in results["claims"]:
-            verdicts.setdefault(claim["verdict"], []).append(claim["key"])
-        for verdict, keys in verdicts.items():
-            console.print(f"claims {verdict}: {', '.join(keys)}")
-        console.print(
-            f"runs: {len(runs['finished'])} finished, {len(runs['unfinished'])} unfinished, "
-            f"{len(runs['missing'])} missing (of {runs['expected']} in grid.json)"
-        )
-        console.print(f"report: {path}")
-        console.print(
-            f"results: {path.parent / 'results.json'}; figures: {path.parent / 'figures'}"
-        )

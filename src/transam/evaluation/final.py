@@ -1,0 +1,282 @@
+"""``transam evaluate``: the final evaluation of a trained run.
+
+:func:`evaluate_run` loads a checkpoint of a run directory and plays ``episodes`` episodes in
+parallel (one per environment copy, one jitted program: the rollout of
+:func:`transam.train.episodes.make_episodes`, which training-time evaluation uses too). It
+writes ``eval_{partners}.json`` (schema below), a figure ``eval_{partners}.png`` and the 2-D
+projection ``eval_{partners}_pca.npz`` (``coords`` [N, 2], ``partner`` [N], ``team_names``,
+``explained_variance``, ``t``) so that a report can redraw it.
+
+Partners are assigned *balanced*, episode i playing partner ``i mod M``, rather than drawn at
+random: every partner gets (nearly) the same number of episodes, which removes the sampling
+variance of the partner mix from the mean return and gives the probe balanced classes.
+
+Per-step curves (index t = 0 .. T-1 within the episode): ``cum_return[t]`` is the mean over
+all episodes of the reward summed up to and including step t (an episode that ended keeps its
+return, so the last value is the mean return); the metric curves ``[t]`` are means over the
+episodes still running at step t (null where none is).
+
+Agent-modeling metrics (:data:`EVAL_METRICS`, each only where the model predicts it):
+``action_accuracy_newest`` and ``obs_mse``, the decoder on the z the policy acted on (the
+newest window position; the authors' evaluation metric), and, for methods that decode every
+window position (TransAM, -fuse, -im), ``action_accuracy_all_positions`` and
+``obs_mse_all_positions``, the authors' training-time form, where later observations in the
+bidirectional window reveal older positions' answers (see :mod:`transam.train.episodes`).
+
+Representation quality (:mod:`transam.evaluation.probe`): a linear probe predicts the partner
+index from the embedding z_t the policy acted on at step t (TransAM's E^o_t; each baseline's
+own z), separately for every t; the projection is PCA of the embeddings at each episode's last
+step. NAM has no learned embedding (its z is the one-hot previous action), so it gets neither;
+the Oracle's z contains the other agents' observations (privileged), which the JSON notes.
+
+JSON: ``env``, ``method``, ``seed``, ``partners`` ("train"|"heldout"|a population directory,
+written to ``eval_pop-NAME.*``), ``population`` (the
+partner choice it mapped to), ``population_name``, ``trained_partners``, ``population_digest``
+and ``trained_population_digest`` (the shipped population's fingerprint now and the run's
+partners.json's; None for scripted partners or runs older than that file), ``checkpoint`` (path
+relative to the run directory: the named one, or the newest that verifies, any newer one that
+does not being named in ``notes``), ``step``, ``episodes``, ``greedy``, ``return`` {mean, std},
+the :data:`EVAL_METRICS` the model predicts, ``per_partner_return`` {team: mean},
+``per_step`` {cum_return, and a curve per metric present},
+``probe`` {accuracy, per_step, chance, train_episodes, test_episodes, features, ridge} and
+``pca`` {explained_variance} (both absent without an embedding), ``notes`` [str].
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import io
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from transam import registry
+from transam.evaluation.figure import evaluation_figure
+from transam.evaluation.probe import linear_probe, pca_2d
+from transam.models.base import ACC_ALL, ACC_NEWEST, MSE_ALL
+from transam.rundir import (
+    EVAL_PARTNERS,
+    CheckpointError,
+    checkpoints,
+    evaluation_path,
+    find_checkpoint,
+    load_run_config,
+    newest_good_checkpoint,
+    projection_path,
+    read_checkpoint,
+    recorded_population,
+    run_lock,
+    warn,
+    write_atomic,
+    write_json,
+)
+from transam.train.config import ConfigError, TrainConfig
+
+EVAL_METRICS = (ACC_NEWEST, ACC_ALL, "obs_mse", MSE_ALL)
+"""The agent-modeling metrics an evaluation may hold (older files: ``action_accuracy``, the
+newest position's, see :data:`~transam.models.base.LEGACY_METRICS`)."""
+
+
+def population_for(trained: str, partners: str) -> str:
+    """The partner choice (make_env's ``partners``) that ``partners`` means for a run trained
+    with ``trained``: "train" is the run's own population; "heldout" one it never met (the
+    held-out split; for a run trained on the held-out split, the default population); a
+    population directory is itself (as an absolute path)."""
+    from transam.compose import DIRECTORY_FORMAT, resolve_partners
+    from transam.partners.learned import is_population_dir
+
+    if partners not in EVAL_PARTNERS:
+        if is_population_dir(partners):
+            return resolve_partners(partners)
+        raise ConfigError(
+            f"unknown partners {partners!r}; valid choices: {', '.join(EVAL_PARTNERS)}, or "
+            f"{DIRECTORY_FORMAT}"
+        )
+    if partners == "train":
+        return trained
+    return "default" if trained == "heldout" else "heldout"
+
+
+def balanced_partners(n: int, num_partners: int) -> np.ndarray:
+    """Episode i plays partner i mod M (see the module docstring for why)."""
+    return (np.arange(n) % num_partners).astype(np.int32)
+
+
+# ---------------------------------------------------------------- the evaluation
+
+
+@functools.lru_cache(maxsize=8)
+def _program(config: TrainConfig, n: int) -> Callable[..., Any]:
+    """The jitted rollout of ``n`` episodes (cached: a grid evaluates many runs of one
+    program in one process)."""
+    from transam.train.episodes import make_episodes
+    from transam.train.programs import env_and_model
+
+    env, model = env_and_model(config)
+    return jax.jit(make_episodes(config, env, model, n, positions=True))
+
+
+def _restore(
+    config: TrainConfig, run_dir: Path, checkpoint: str | int | None, notes: list[str]
+) -> tuple[Path, Any]:
+    """(path, RunnerState) of the named checkpoint, or of the newest one that verifies (each
+    newer one that does not is reported and noted). The template is only shapes: nothing is
+    compiled."""
+    from transam.train.a2c import init_runner
+    from transam.train.programs import env_and_model
+
+    env, model = env_and_model(config)
+    template = jax.eval_shape(lambda k: init_runner(config, env, model, k), jax.random.key(0))
+    path = find_checkpoint(run_dir, checkpoint)
+    if checkpoint is not None:
+        try:
+            return path, read_checkpoint(path, template)
+        except CheckpointError as err:
+            raise ConfigError(f"{err}; choose another with --checkpoint") from None
+
+    def report(message: str) -> None:
+        warn(message)
+        notes.append(message)
+
+    found = newest_good_checkpoint([run_dir], template, report=report)
+    if found is None:
+        names = ", ".join(p.name for _, p in sorted(checkpoints(run_dir).items()))
+        raise ConfigError(f"no checkpoint of {str(run_dir)!r} verifies (have: {names})")
+    chunk, (state,) = found
+    return checkpoints(run_dir)[chunk], state
+
+
+def _per_step_mean(values: np.ndarray, live: np.ndarray) -> list[float | None]:
+    count = live.sum(1)
+    return [float(v / c) if c > 0 else None for v, c in zip(values.sum(1), count, strict=True)]
+
+
+def evaluate_run(
+    run_dir: str | Path,
+    episodes: int = 100,
+    partners: str = "train",
+    checkpoint: str | int | None = None,
+    seed: int = 0,
+) -> dict[str, Any]:
+    """Evaluate a run's checkpoint on ``episodes`` episodes with its training partners or
+    held-out ones; write eval_{partners}.json/.png/_pca.npz and return the JSON's contents.
+    Holds the run's lock meanwhile; without ``checkpoint``, uses the newest checkpoint that
+    verifies and notes each newer one that does not."""
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 2:
+        raise ConfigError(f"episodes must be an integer >= 2, got {episodes!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
+    run_dir = Path(run_dir)
+    config = load_run_config(run_dir)
+    population_for(config.partners, partners)  # checks ``partners``
+    top = run_dir if (run_dir / "config.json").exists() else run_dir.parent
+    with run_lock(top, "transam evaluate"):
+        return _evaluate_locked(run_dir, top, config, episodes, partners, checkpoint, seed)
+
+
+def _evaluate_locked(
+    run_dir: Path,
+    top: Path,
+    config: TrainConfig,
+    episodes: int,
+    partners: str,
+    checkpoint: str | int | None,
+    seed: int,
+) -> dict[str, Any]:
+    from transam.partners.learned import population_digest
+    from transam.train.a2c import steps_per_update
+    from transam.train.programs import env_and_model, program_key
+
+    population = population_for(config.partners, partners)
+    notes: list[str] = []
+    ckpt, state = _restore(config, run_dir, checkpoint, notes)
+
+    eval_config = dataclasses.replace(config, partners=population)
+    env, model = env_and_model(eval_config)
+    teams = env.population.team_names
+    partner_ids = balanced_partners(episodes, env.num_partners)
+    run = _program(program_key(eval_config), episodes)
+    ep = jax.device_get(
+        run(state.policy_params, state.model_params, jax.random.key(seed), jnp.asarray(partner_ids))
+    )
+    reward = np.asarray(ep.reward, np.float64)
+    live = np.asarray(ep.live, np.float64)
+    labels = np.asarray(ep.partner)
+    returns = reward.sum(0)
+
+    if not (top / "final.json").exists():
+        notes.append("the run has not finished training (no final.json)")
+    if partners == "heldout" and config.partners != "default":
+        notes.append(
+            f"the run trained with partners={config.partners!r}; 'heldout' means the "
+            f"{population!r} population here"
+        )
+    digest = population_digest(config.env, population)
+    recorded = recorded_population(top)
+    trained_digest = recorded["digest"] if recorded else None
+    if partners == "train" and recorded and trained_digest != digest:
+        notes.append(
+            f"the run trained against population {trained_digest}; the shipped "
+            f"{population!r} population is now {digest}: returns are not comparable with "
+            "its training curve"
+        )
+    out: dict[str, Any] = {
+        "env": config.env,
+        "method": config.method,
+        "seed": config.seed,
+        "partners": partners,
+        "population": population,
+        "population_name": env.population.name,
+        "trained_partners": config.partners,
+        "population_digest": digest,
+        "trained_population_digest": trained_digest,
+        "checkpoint": ckpt.relative_to(run_dir).as_posix(),
+        "step": int(state.update) * steps_per_update(config),
+        "episodes": episodes,
+        "greedy": config.eval.greedy,
+        "return": {"mean": float(returns.mean()), "std": float(returns.std())},
+    }
+    per_step: dict[str, Any] = {"cum_return": [float(v) for v in reward.cumsum(0).mean(1)]}
+    for key in EVAL_METRICS:
+        if key in ep.scores:
+            score = np.asarray(ep.scores[key], np.float64)
+            out[key] = float(score.sum() / live.sum())
+            per_step[key] = _per_step_mean(score, live)
+    out["per_partner_return"] = {
+        teams[p]: float(returns[labels == p].mean()) for p in np.unique(labels)
+    }
+    out["per_step"] = per_step
+
+    pca = None
+    if not registry.method_entry(config.method).embedding:
+        notes.append(f"{config.method} has no learned embedding: no probe or projection")
+    else:
+        z = np.asarray(ep.z, np.float64)
+        out["probe"] = linear_probe(z, live, labels, seed)
+        if model.privileged:
+            out["probe"]["note"] = "privileged z: it contains the other agents' observations"
+        last = live.sum(0).astype(int) - 1  # each episode's last step
+        coords, ratio = pca_2d(z[last, np.arange(episodes)])
+        out["pca"] = {"explained_variance": ratio}
+        pca = (coords, last)
+        buf = io.BytesIO()
+        np.savez(
+            buf,
+            coords=coords.astype(np.float32),
+            partner=labels,
+            team_names=np.asarray(teams),
+            explained_variance=np.asarray(ratio),
+            t=last,
+        )
+        write_atomic(projection_path(run_dir, partners), buf.getvalue())
+    out["notes"] = notes
+
+    path = evaluation_path(run_dir, partners)
+    write_json(path, out)
+    write_atomic(path.with_suffix(".png"), evaluation_figure(out, teams, labels, pca))
+    return out
