@@ -575,6 +575,28 @@ class TransAM:
             raise ValueError(f"{self.name} decodes one pooled z per window, not its positions")
         return self.decode(params, self._encode(params, carry), other_obs), carry.valid
 
+    def position_terms(
+        self, params: Params, emb: jax.Array, tgt_other: jax.Array, tgt_act: jax.Array
+    ) -> tuple[jax.Array, jax.Array, jax.Array | None, jax.Array]:
+        """The decoder's loss terms at decoded embeddings ``emb`` [T, P, width] against their
+        targets (o^{-1} [T, P, N, D], a^{-1} [T, P, N]): (loss [T, P], cross-entropy [T, P],
+        observation MSE [T, P] or None without a reconstruction, action logits [T, P, N, A]).
+        The one definition of the per-position loss (the streaming model uses it too)."""
+        pred_obs, logits = self.decode(params, emb, tgt_other)  # [T, P, N*D] | None, [T, P, N, A]
+        assert logits is not None  # both decoders predict actions
+        ce_each = optax.softmax_cross_entropy_with_integer_labels(logits, tgt_act)  # [T, P, N]
+        ce = jnp.mean(ce_each, axis=-1)
+        action_term = ce
+        if self.config.action_loss == "authors":
+            action_term = authors_action_loss(logits, tgt_act)
+        per_position = action_term
+        mse = None
+        if pred_obs is not None:
+            tgt_obs = tgt_other.reshape(*tgt_other.shape[:2], -1)
+            mse = jnp.mean((pred_obs - tgt_obs) ** 2, axis=-1)  # [T, P]
+            per_position = per_position + mse
+        return per_position, ce, mse, logits
+
     def loss(
         self,
         params: Params,
@@ -651,19 +673,7 @@ class TransAM:
         jc = jnp.clip(j, 0, num_steps - 1)  # [T, P] with P = K or 1 positions
         tgt_other = targets.other_obs.astype(jnp.float32)[jc]  # [T, P, N, D]
         tgt_act = targets.other_actions.astype(jnp.int32)[jc]  # [T, P, N]
-        pred_obs, logits = self.decode(params, emb, tgt_other)  # [T, P, N*D] | None, [T, P, N, A]
-        assert logits is not None  # both decoders predict actions
-        ce_each = optax.softmax_cross_entropy_with_integer_labels(logits, tgt_act)  # [T, P, N]
-        ce = jnp.mean(ce_each, axis=-1)
-        action_term = ce
-        if self.config.action_loss == "authors":
-            action_term = authors_action_loss(logits, tgt_act)
-        per_position = action_term
-        mse = None
-        if pred_obs is not None:
-            tgt_obs = tgt_other.reshape(*tgt_other.shape[:2], -1)
-            mse = jnp.mean((pred_obs - tgt_obs) ** 2, axis=-1)  # [T, P]
-            per_position = per_position + mse
+        per_position, ce, mse, logits = self.position_terms(params, emb, tgt_other, tgt_act)
         # Metrics: newest position, and every valid position with targets (whatever recon_at
         # trains); one pooled z per window has no positions to average over.
         pooled = self.config.pool == "mean"
