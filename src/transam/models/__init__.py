@@ -15,6 +15,7 @@ from transam.models.liam import LIAM
 from transam.models.nam import NAM
 from transam.models.oracle import Oracle
 from transam.models.pel import PEL
+from transam.models.stream import StreamTransAM
 from transam.models.transam import TransAM, TransAMConfig
 
 __all__ = [
@@ -31,10 +32,13 @@ Factory = Callable[[GameSpec, TransAMConfig, BaselineConfig], AgentModel]
 
 
 def _transformer(**ablation: str) -> Factory:
-    """TransAM with an ablation's settings (its imitation decoder sized as CAIL's)."""
+    """TransAM with an ablation's settings (its imitation decoder sized as CAIL's): the
+    window model, or the streaming one with ``attention="stream"``."""
 
     def build(spec: GameSpec, t: TransAMConfig, b: BaselineConfig) -> AgentModel:
         config = dataclasses.replace(t, **ablation)  # type: ignore[arg-type]
+        if config.attention == "stream":
+            return StreamTransAM(spec=spec, config=config, decoder_hidden=b.decoder_hidden)
         return TransAM(spec=spec, config=config, decoder_hidden=b.decoder_hidden)
 
     return build

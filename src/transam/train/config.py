@@ -36,6 +36,9 @@ EndBootstrap = Literal["zero", "return_mean"]
 PolicyInit = Literal["orthogonal", "torch"]
 DROPOUT_METHODS = ("transam", "transam-fuse", "transam-pool", "transam-im")
 """Methods whose execution path can apply dropout (``a2c.act_dropout``)."""
+STREAM_METHODS = ("transam", "transam-fuse", "transam-im")
+"""Methods with a streaming variant (``model.attention stream``); the other transformer
+methods (TransAM-pool, PEL) pool a window and refuse it, the rest ignore model settings."""
 
 
 class ConfigError(EnvError):
@@ -240,6 +243,14 @@ class TrainConfig:
         _choice("model.tokens", m.tokens, ("separate", "fuse"))
         _choice("model.pool", m.pool, ("last", "mean"))
         _choice("model.decoder", m.decoder, ("reconstruct", "imitate"))
+        _choice("model.attention", m.attention, ("window", "stream"))
+        if m.memory is not None:
+            _at_least("model.memory", m.memory, 1)
+        if m.attention == "stream" and self.method in ("transam-pool", "pel"):
+            raise ConfigError(
+                f"model.attention 'stream' applies to the methods {', '.join(STREAM_METHODS)}; "
+                f"got method {self.method!r} (it pools a window)"
+            )
         b = self.baseline
         for name in ("hidden", "embed_dim", "decoder_hidden"):
             _at_least(f"baseline.{name}", getattr(b, name), 1)
@@ -273,8 +284,13 @@ ADDED_SETTINGS: dict[tuple[str, str], Any] = {
     ("model", "embed_ln"): True,
     ("model", "init"): "default",
     ("model", "action_loss"): "ce",
+    ("model", "attention"): "window",
+    ("model", "memory"): None,
 }
 """Settings added after runs were first written, with the value that reproduces those runs."""
+PRESET_FREE = (("model", "attention"), ("model", "memory"))
+"""Added settings that the authors' preset leaves at their defaults (the streaming encoder
+is not part of the authors' loop; every other added setting is one of the preset's)."""
 
 
 def with_added_settings(saved: dict[str, Any]) -> dict[str, Any]:
