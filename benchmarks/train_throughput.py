@@ -2,7 +2,7 @@
 update), the FLOP rate it achieves, and this machine's matmul FLOP rate for comparison.
 
     python benchmarks/train_throughput.py [--envs spread tag ...] [--method nam|transam]
-        [--updates 100] [--repeats 5] [--seeds 4]
+        [--attention window stream] [--updates 100] [--repeats 5] [--seeds 4]
 
 Each environment runs the default training configuration (``TrainConfig``) for a chunk of
 ``--updates`` updates, compiled ahead of time; the median of ``--repeats`` timed chunks is
@@ -10,6 +10,9 @@ reported. FLOPs are counted from the chunk's jaxpr (XLA's cost analysis counts a
 not once per iteration): matrix products exactly (2·M·N·K), every other arithmetic op as one
 FLOP per output element, data movement as zero; loop bodies are multiplied by their trip counts.
 The ratio compares the achieved rate to a large float32 matmul timed in the same process.
+
+``--attention window stream`` (TransAM only) times the window model and the streaming one
+(``model.attention``) side by side and prints the ratio of their env-steps/s.
 
 ``--seeds n`` also times n seeds vmapped in one program against the single-seed program (which
 is what running the seeds one after another costs per step).
@@ -21,7 +24,7 @@ import math
 import statistics
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import jax
@@ -32,6 +35,7 @@ from rich.console import Console
 from rich.table import Table
 
 from transam.jaxcache import enable_compilation_cache
+from transam.models import TransAMConfig
 from transam.train.a2c import init_runner, make_chunk
 from transam.train.config import TrainConfig
 from transam.train.programs import env_and_model
@@ -175,6 +179,8 @@ class Args:
     """environments"""
     method: Literal["transam", "nam"] = "nam"
     """agent-modeling method"""
+    attention: tuple[Literal["window", "stream"], ...] = ("window",)
+    """TransAM's attention(s) to time (``model.attention``); two: side by side, with the ratio"""
     updates: int = 100
     """updates per timed chunk"""
     repeats: int = 5
@@ -183,7 +189,15 @@ class Args:
     """also compare n vmapped seeds with one seed (0: skip)"""
 
 
+def config(env: str, method: str, attention: str) -> TrainConfig:
+    """The default training configuration with the given attention."""
+    model = replace(TransAMConfig(), attention=attention)
+    return TrainConfig(env=env, method=method, model=model)  # type: ignore[arg-type]
+
+
 def main(args: Args) -> None:
+    if args.method != "transam" and args.attention != ("window",):
+        raise SystemExit("--attention applies to --method transam")
     enable_compilation_cache()
     console = Console()
     peak = matmul_gflops()
@@ -191,28 +205,47 @@ def main(args: Args) -> None:
         title=f"full A2C training, method {args.method}, default config, {args.updates} updates "
         f"x {args.repeats} repeats, {jax.devices()[0].platform}"
     )
-    for col in ("env", "steps/s", "GFLOP/chunk", "matmul share", "GFLOP/s", "matmul GFLOP/s"):
+    cols = ("env", "attention", "steps/s", "GFLOP/chunk", "matmul share", "GFLOP/s")
+    for col in (*cols, "matmul GFLOP/s"):
         table.add_column(col, justify="right")
     table.add_column("ratio", justify="right")
+    rates: dict[tuple[str, str], float] = {}
     for name in args.envs:
-        cfg = TrainConfig(env=name, method=args.method)
-        r = time_training(cfg, args.updates, args.repeats)
-        table.add_row(
-            name,
-            f"{r.steps_per_s:,.0f}",
-            f"{r.gflop_per_chunk:.3g}",
-            f"{r.matmul_share:.0%}",
-            f"{r.gflops:.3g}",
-            f"{peak:.3g}",
-            f"{r.gflops / peak:.2%}",
-        )
+        for attention in args.attention:
+            r = time_training(config(name, args.method, attention), args.updates, args.repeats)
+            rates[name, attention] = r.steps_per_s
+            table.add_row(
+                name,
+                attention if args.method == "transam" else "-",
+                f"{r.steps_per_s:,.0f}",
+                f"{r.gflop_per_chunk:.3g}",
+                f"{r.matmul_share:.0%}",
+                f"{r.gflops:.3g}",
+                f"{peak:.3g}",
+                f"{r.gflops / peak:.2%}",
+            )
     console.print(table)
+    if len(args.attention) > 1:
+        first, *others = args.attention
+        side = Table(title=f"env-steps/s by attention (ratio: against {first})")
+        side.add_column("env", justify="right")
+        for attention in args.attention:
+            side.add_column(f"{attention} steps/s", justify="right")
+        for attention in others:
+            side.add_column(f"{attention} / {first}", justify="right")
+        for name in args.envs:
+            side.add_row(
+                name,
+                *(f"{rates[name, a]:,.0f}" for a in args.attention),
+                *(f"{rates[name, a] / rates[name, first]:.2f}x" for a in others),
+            )
+        console.print(side)
     if args.seeds > 1:
         seeds = Table(title=f"{args.seeds} seeds: one vmapped program vs one seed at a time")
         for col in ("env", "vmap steps/s", "sequential steps/s", "vmap speed-up"):
             seeds.add_column(col, justify="right")
         for name in args.envs:
-            cfg = TrainConfig(env=name, method=args.method)
+            cfg = config(name, args.method, args.attention[0])
             one = time_training(cfg, args.updates, args.repeats)
             many = time_training(cfg, args.updates, args.repeats, seeds=args.seeds)
             seeds.add_row(

@@ -1,4 +1,5 @@
-"""The agent-model contract, checked for every method in ``PAPER_METHODS`` on Spread.
+"""The agent-model contract, checked for every method in ``PAPER_METHODS`` on Spread (and for
+TransAM with streaming attention, ``transam+stream``).
 
 Per method (tiny settings, so each compiles in seconds): the execution path (``step`` with its
 carry) and the training path (``embed_rollout``) agree across an episode boundary; only the
@@ -45,8 +46,20 @@ def env() -> ControlledEnv:
     return make_env("spread", partners="heuristic")  # the data the thresholds were set on
 
 
+STREAM = "transam+stream"
+"""TransAM with streaming attention (``model.attention stream``): a variant checked as a method."""
+MODELS = [*PAPER_METHODS, STREAM]
+
+
+def settings(method: str) -> tuple[str, TransAMConfig]:
+    """(method name, transformer settings) of a test id ``method[+stream]``."""
+    name, _, attention = method.partition("+")
+    return name, dataclasses.replace(TINY_T, attention="stream") if attention else TINY_T
+
+
 def tiny(env: ControlledEnv, method: str) -> AgentModel:
-    return make_model(method, env.spec, TINY_T, TINY_B)
+    name, config = settings(method)
+    return make_model(name, env.spec, config, TINY_B)
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +79,7 @@ def _embed_fn(model: AgentModel) -> Any:
     return lambda p, c, xs, _views: model.embed_rollout(p, c, xs)
 
 
-@pytest.mark.parametrize("method", PAPER_METHODS)
+@pytest.mark.parametrize("method", MODELS)
 def test_execution_and_training_paths_agree(env: ControlledEnv, data: Any, method: str) -> None:
     model = tiny(env, method)
     params = model.init(jax.random.key(1), env.spec)
@@ -100,7 +113,7 @@ def test_execution_and_training_paths_agree(env: ControlledEnv, data: Any, metho
     np.testing.assert_allclose(fresh[1], zs[25], atol=1e-5)
 
 
-@pytest.mark.parametrize("method", PAPER_METHODS)
+@pytest.mark.parametrize("method", MODELS)
 def test_only_the_oracle_execution_path_takes_partner_data(
     env: ControlledEnv, data: Any, method: str
 ) -> None:
@@ -125,7 +138,7 @@ def test_only_the_oracle_execution_path_takes_partner_data(
     assert not np.allclose(z, z2)
 
 
-@pytest.mark.parametrize("method", PAPER_METHODS)
+@pytest.mark.parametrize("method", MODELS)
 def test_auxiliary_loss_finite_and_falls(env: ControlledEnv, data: Any, method: str) -> None:
     model = tiny(env, method)
     xs, record = jax.tree.map(lambda a: a[10:30], (data[0], data[2]))  # [20, 8], crosses 25
@@ -168,20 +181,21 @@ def test_auxiliary_loss_finite_and_falls(env: ControlledEnv, data: Any, method: 
 
 
 def tiny_run(method: str, out: Path) -> TrainConfig:
+    name, config = settings(method)
     return TrainConfig(
         env="spread",
-        method=method,  # type: ignore[arg-type]
+        method=name,  # type: ignore[arg-type]
         total_steps=200,  # two chunks of 4 episodes x 25 steps
         out=str(out),
         progress=False,
         a2c=A2CConfig(num_envs=4, n_steps=5, hidden=16),
-        model=TINY_T,
+        model=config,
         baseline=TINY_B,
         eval=EvalConfig(every_episodes=4, episodes=8),
     )
 
 
-@pytest.mark.parametrize("method", PAPER_METHODS)
+@pytest.mark.parametrize("method", MODELS)
 def test_checkpoint_round_trip(env: ControlledEnv, method: str) -> None:
     """A method's parameters, optimiser state and carry survive the checkpoint format (msgpack)
     leaf for leaf (the rest of the runner state is the same for every method)."""
@@ -200,7 +214,7 @@ def test_checkpoint_round_trip(env: ControlledEnv, method: str) -> None:
 # One method per code path (transformer, privileged, contrastive with pairing): a whole run per
 # method costs a full compile of the training program. The recurrent path (LIAM) is trained,
 # interrupted and resumed exactly by the smoke grid (test_reproduce.py, test_grid_ray.py).
-@pytest.mark.parametrize("method", ["transam", "oracle", "pel"])
+@pytest.mark.parametrize("method", ["transam", "oracle", "pel", STREAM])
 def test_tiny_run_writes_the_keys_and_resume_is_exact(method: str, tmp_path: Path) -> None:
     cfg = tiny_run(method, tmp_path / "ref")
     assert train(cfg).finished
@@ -209,8 +223,10 @@ def test_tiny_run_writes_the_keys_and_resume_is_exact(method: str, tmp_path: Pat
     for rec in records:
         assert np.isfinite(rec["eval/return"]) and np.isfinite(rec["train/policy_loss"])
         assert ("eval/action_accuracy_newest" in rec) == (method != "oracle")
-        assert ("eval/obs_mse" in rec) == (method in ("transam", "liam"))
-    # Kill after one chunk (its checkpoint written), resume: identical metrics.
+        assert ("eval/obs_mse" in rec) == (method in ("transam", "liam", STREAM))
+    # Kill after one chunk (its checkpoint written), resume: identical metrics. The cut run
+    # starts afresh with the same seed, so this also shows the run is deterministic (and, for
+    # the streaming model, that its key/value cache is checkpointed with the runner state).
     cut = dataclasses.replace(cfg, out=str(tmp_path / "cut"))
     assert not train(cut, stop_after_chunks=1).finished
     assert train(dataclasses.replace(cut, resume=True)).finished

@@ -28,6 +28,7 @@ from transam.rundir import load_run_config
 from transam.train import a2c, presets
 from transam.train.config import (
     ADDED_SETTINGS,
+    PRESET_FREE,
     A2CConfig,
     ConfigError,
     EvalConfig,
@@ -163,7 +164,8 @@ def test_preset_sets_every_documented_setting() -> None:
         assert s.source, s.name
     # Every setting added for the authors' loop (and the two earlier deviations) is in it.
     for group, name in ADDED_SETTINGS:
-        assert f"{group}.{name}" in names, f"{group}.{name}"
+        if (group, name) not in PRESET_FREE:
+            assert f"{group}.{name}" in names, f"{group}.{name}"
     # Each is documented in the preset table of docs/methods.md and in the code's own list.
     doc = (Path(__file__).parents[1] / "docs" / "methods.md").read_text()
     for name in names:

@@ -120,6 +120,9 @@ class MethodEntry:
     """keyword arguments for ``factory`` (an ablation's settings)"""
     dropout: bool = False
     """its execution path can apply dropout (``a2c.act_dropout``)"""
+    stream: bool = False
+    """it has a streaming variant (``model.attention stream``); TransAM-pool and PEL pool a
+    window and refuse it"""
     embedding: bool = True
     """its z is a learned representation, worth probing (NAM's is the one-hot previous action)"""
 
@@ -285,6 +288,7 @@ def _paper_method(name: MethodName, display: str, kind: MethodKind, **options: s
         kind=kind,
         options=options,
         dropout=transformer,
+        stream=transformer and "pool" not in options,
         embedding=name != "nam",
     )
 

@@ -16,6 +16,7 @@ from transam.models.liam import LIAM
 from transam.models.nam import NAM
 from transam.models.oracle import Oracle
 from transam.models.pel import PEL
+from transam.models.stream import StreamTransAM
 from transam.models.transam import TransAM, TransAMConfig
 
 __all__ = [
@@ -38,8 +39,11 @@ __all__ = [
 def build_transam(
     spec: GameSpec, transformer: TransAMConfig, baseline: BaselineConfig, **ablation: str
 ) -> AgentModel:
-    """TransAM, or an ablation with its settings (its imitation decoder sized as CAIL's)."""
+    """TransAM, or an ablation with its settings (its imitation decoder sized as CAIL's): the
+    window model, or the streaming one with ``attention="stream"``."""
     config = dataclasses.replace(transformer, **ablation)  # type: ignore[arg-type]
+    if config.attention == "stream":
+        return StreamTransAM(spec=spec, config=config, decoder_hidden=baseline.decoder_hidden)
     return TransAM(spec=spec, config=config, decoder_hidden=baseline.decoder_hidden)
 
 

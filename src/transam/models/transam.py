@@ -120,6 +120,13 @@ class TransAMConfig:
     or the authors' bug ('authors'): PyTorch's cross-entropy applied to softmax outputs
     shaped [other agents, actions], whose class axis is the agents, not the actions (see
     :func:`authors_action_loss`)"""
+    attention: Literal["window", "stream"] = "window"
+    """re-encode the K-step window at every step ('window', the paper's model), or encode each
+    token once with causal attention over a key/value cache of the last ``memory`` tokens
+    carried between steps ('stream', :mod:`transam.models.stream`; pool="last" only)"""
+    memory: int | None = None
+    """tokens the streaming encoder attends to before each token (its key/value cache length;
+    None: the window's token count, 3K, or K with tokens="fuse"); 'stream' only"""
 
 
 # --------------------------------------------------------------------------------------------
@@ -178,8 +185,37 @@ def _entry(x: LocalStep) -> WindowCarry:
     )
 
 
+def block_sublayers(
+    cfg: TransAMConfig,
+    deterministic: bool,
+    x: jax.Array,
+    attend: Callable[[jax.Array], jax.Array],
+) -> jax.Array:
+    """The residual structure of one block around its attention ``attend`` (post-norm as BERT,
+    or pre-norm), with the ReLU feed-forward; called inside a block's compact method, whose
+    submodules it names, so the window and the streaming blocks share it."""
+    bert = bert_init(cfg)
+    drop = nn.Dropout(cfg.dropout, deterministic=deterministic)
+
+    def feed_forward(h: jax.Array) -> jax.Array:
+        h = nn.relu(nn.Dense(cfg.ff_width, name="ff_in", **bert)(h))
+        return nn.Dense(cfg.width, name="ff_out", **bert)(h)
+
+    if cfg.norm == "post":
+        x = nn.LayerNorm(name="ln_attn")(x + drop(attend(x)))
+        return nn.LayerNorm(name="ln_ff")(x + drop(feed_forward(x)))
+    x = x + drop(attend(nn.LayerNorm(name="ln_attn")(x)))
+    return x + drop(feed_forward(nn.LayerNorm(name="ln_ff")(x)))
+
+
+def bert_init(cfg: TransAMConfig) -> dict[str, Any]:
+    """Kernel initialiser of the encoder blocks: BERT's N(0, 0.02) with ``init="authors"``."""
+    return {"kernel_init": nn.initializers.normal(0.02)} if cfg.init == "authors" else {}
+
+
 class _Block(nn.Module):
-    """One transformer encoder block (post-norm as BERT, or pre-norm), for ``nn.scan``."""
+    """One transformer encoder block over a window (bidirectional or causal mask), for
+    ``nn.scan``."""
 
     config: TransAMConfig
     deterministic: bool
@@ -187,9 +223,6 @@ class _Block(nn.Module):
     @nn.compact
     def __call__(self, x: jax.Array, mask: jax.Array) -> tuple[jax.Array, None]:
         cfg = self.config
-        bert: dict[str, Any] = {}
-        if cfg.init == "authors":
-            bert["kernel_init"] = nn.initializers.normal(0.02)
         attn = nn.MultiHeadDotProductAttention(
             num_heads=cfg.heads,
             qkv_features=cfg.width,
@@ -198,21 +231,39 @@ class _Block(nn.Module):
             broadcast_dropout=False,  # independent masks per window
             deterministic=self.deterministic,
             name="attn",
-            **bert,
+            **bert_init(cfg),
         )
-        drop = nn.Dropout(cfg.dropout, deterministic=self.deterministic)
+        return block_sublayers(cfg, self.deterministic, x, lambda h: attn(h, mask=mask)), None
 
-        def feed_forward(h: jax.Array) -> jax.Array:
-            h = nn.relu(nn.Dense(cfg.ff_width, name="ff_in", **bert)(h))
-            return nn.Dense(cfg.width, name="ff_out", **bert)(h)
 
-        if cfg.norm == "post":
-            x = nn.LayerNorm(name="ln_attn")(x + drop(attn(x, mask=mask)))
-            x = nn.LayerNorm(name="ln_ff")(x + drop(feed_forward(x)))
-        else:
-            x = x + drop(attn(nn.LayerNorm(name="ln_attn")(x), mask=mask))
-            x = x + drop(feed_forward(nn.LayerNorm(name="ln_ff")(x)))
-        return x, None
+def step_tokens(
+    cfg: TransAMConfig, num_actions: int, episode_len: int, w: WindowCarry
+) -> jax.Array:
+    """Tokens [..., K, n, width] of the steps ``w`` [..., K], before any LayerNorm: per step
+    r_{t-1}, a_{t-1}, o_t (n = 3, the observation's last) or one fused token (n = 1), each
+    plus the position-in-episode embedding of t. Invalid entries are zeroed so that even their
+    (masked) tokens carry nothing stale. Called inside an encoder's compact method, whose
+    submodules (``embed_*``) it names, so the window and streaming encoders share it."""
+    valid = w.valid
+    obs = jnp.where(valid[..., None], w.obs, 0.0)
+    reward = jnp.where(valid, w.prev_reward, 0.0)[..., None]
+    action = jax.nn.one_hot(jnp.where(valid, w.prev_action, -1), num_actions)
+    # Clipped: jnp.take would read NaN past the table (an episode longer than episode_len).
+    t = jnp.clip(jnp.where(valid, w.t, 0), 0, episode_len - 1)
+    authors = cfg.init == "authors"
+    embed_init: dict[str, Any] = {}
+    if authors:
+        embed_init["embedding_init"] = nn.initializers.normal(1.0)
+    pos = nn.Embed(episode_len, cfg.width, name="embed_t", **embed_init)(t)
+
+    def embed(h: jax.Array, name: str) -> jax.Array:
+        return _dense(cfg.width, h.shape[-1], authors, name)(h)
+
+    if cfg.tokens == "separate":  # (r_{t-1}, a_{t-1}, o_t) per step
+        tokens = [embed(reward, "embed_r"), embed(action, "embed_a"), embed(obs, "embed_o")]
+    else:  # one token per step from concat(r_{t-1}, a_{t-1}, o_t)
+        tokens = [embed(jnp.concatenate([reward, action, obs], axis=-1), "embed_step")]
+    return jnp.stack(tokens, axis=-2) + pos[..., None, :]
 
 
 class _Encoder(nn.Module):
@@ -229,32 +280,8 @@ class _Encoder(nn.Module):
         k = w.valid.shape[-1]
         batch = w.valid.shape[:-1]
         valid = w.valid
-        # Invalid entries are zeroed so that even their (masked) tokens carry nothing stale.
-        obs = jnp.where(valid[..., None], w.obs, 0.0)
-        reward = jnp.where(valid, w.prev_reward, 0.0)[..., None]
-        action = jax.nn.one_hot(jnp.where(valid, w.prev_action, -1), self.num_actions)
-        # Clipped: jnp.take would read NaN past the table (an episode longer than episode_len).
-        t = jnp.clip(jnp.where(valid, w.t, 0), 0, self.episode_len - 1)
-        authors = cfg.init == "authors"
-        embed_init: dict[str, Any] = {}
-        if authors:
-            embed_init["embedding_init"] = nn.initializers.normal(1.0)
-        pos = nn.Embed(self.episode_len, cfg.width, name="embed_t", **embed_init)(t)
-
-        def embed(h: jax.Array, name: str) -> jax.Array:
-            return _dense(cfg.width, h.shape[-1], authors, name)(h)
-
-        if cfg.tokens == "separate":  # (r_{t-1}, a_{t-1}, o_t) per step
-            step_tokens = [
-                embed(reward, "embed_r"),
-                embed(action, "embed_a"),
-                embed(obs, "embed_o"),
-            ]
-        else:  # one token per step from concat(r_{t-1}, a_{t-1}, o_t)
-            fused = jnp.concatenate([reward, action, obs], axis=-1)
-            step_tokens = [embed(fused, "embed_step")]
-        n = len(step_tokens)  # tokens per step; the observation's (or the fused) token is last
-        tokens = jnp.stack(step_tokens, axis=-2) + pos[..., None, :]  # [..., K, n, width]
+        tokens = step_tokens(cfg, self.num_actions, self.episode_len, w)  # [..., K, n, width]
+        n = tokens.shape[-2]
         x = tokens.reshape(*batch, n * k, cfg.width)
         if cfg.embed_ln:
             x = nn.LayerNorm(name="embed_ln")(x)
@@ -395,6 +422,11 @@ class TransAM:
             )
         if self.decoder_hidden < 1:
             raise ValueError(f"TransAM decoder_hidden must be >= 1; got {self.decoder_hidden}")
+        if cfg.attention != "window":
+            raise ValueError(
+                f"TransAM is the window model; attention={cfg.attention!r} is "
+                "transam.models.stream.StreamTransAM (make_model picks it)"
+            )
         if cfg.init not in ("default", "authors") or cfg.action_loss not in ("ce", "authors"):
             raise ValueError(
                 f"TransAM init/action_loss invalid: {cfg.init!r}, {cfg.action_loss!r}; "
@@ -543,6 +575,28 @@ class TransAM:
             raise ValueError(f"{self.name} decodes one pooled z per window, not its positions")
         return self.decode(params, self._encode(params, carry), other_obs), carry.valid
 
+    def position_terms(
+        self, params: Params, emb: jax.Array, tgt_other: jax.Array, tgt_act: jax.Array
+    ) -> tuple[jax.Array, jax.Array, jax.Array | None, jax.Array]:
+        """The decoder's loss terms at decoded embeddings ``emb`` [T, P, width] against their
+        targets (o^{-1} [T, P, N, D], a^{-1} [T, P, N]): (loss [T, P], cross-entropy [T, P],
+        observation MSE [T, P] or None without a reconstruction, action logits [T, P, N, A]).
+        The one definition of the per-position loss (the streaming model uses it too)."""
+        pred_obs, logits = self.decode(params, emb, tgt_other)  # [T, P, N*D] | None, [T, P, N, A]
+        assert logits is not None  # both decoders predict actions
+        ce_each = optax.softmax_cross_entropy_with_integer_labels(logits, tgt_act)  # [T, P, N]
+        ce = jnp.mean(ce_each, axis=-1)
+        action_term = ce
+        if self.config.action_loss == "authors":
+            action_term = authors_action_loss(logits, tgt_act)
+        per_position = action_term
+        mse = None
+        if pred_obs is not None:
+            tgt_obs = tgt_other.reshape(*tgt_other.shape[:2], -1)
+            mse = jnp.mean((pred_obs - tgt_obs) ** 2, axis=-1)  # [T, P]
+            per_position = per_position + mse
+        return per_position, ce, mse, logits
+
     def loss(
         self,
         params: Params,
@@ -619,19 +673,7 @@ class TransAM:
         jc = jnp.clip(j, 0, num_steps - 1)  # [T, P] with P = K or 1 positions
         tgt_other = targets.other_obs.astype(jnp.float32)[jc]  # [T, P, N, D]
         tgt_act = targets.other_actions.astype(jnp.int32)[jc]  # [T, P, N]
-        pred_obs, logits = self.decode(params, emb, tgt_other)  # [T, P, N*D] | None, [T, P, N, A]
-        assert logits is not None  # both decoders predict actions
-        ce_each = optax.softmax_cross_entropy_with_integer_labels(logits, tgt_act)  # [T, P, N]
-        ce = jnp.mean(ce_each, axis=-1)
-        action_term = ce
-        if self.config.action_loss == "authors":
-            action_term = authors_action_loss(logits, tgt_act)
-        per_position = action_term
-        mse = None
-        if pred_obs is not None:
-            tgt_obs = tgt_other.reshape(*tgt_other.shape[:2], -1)
-            mse = jnp.mean((pred_obs - tgt_obs) ** 2, axis=-1)  # [T, P]
-            per_position = per_position + mse
+        per_position, ce, mse, logits = self.position_terms(params, emb, tgt_other, tgt_act)
         # Metrics: newest position, and every valid position with targets (whatever recon_at
         # trains); one pooled z per window has no positions to average over.
         pooled = self.config.pool == "mean"

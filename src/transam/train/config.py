@@ -228,6 +228,15 @@ class TrainConfig:
         _choice("model.tokens", m.tokens, ("separate", "fuse"))
         _choice("model.pool", m.pool, ("last", "mean"))
         _choice("model.decoder", m.decoder, ("reconstruct", "imitate"))
+        _choice("model.attention", m.attention, ("window", "stream"))
+        if m.memory is not None:
+            _at_least("model.memory", m.memory, 1)
+        stream = [n for n in registry.method_names() if registry.method_entry(n).stream]
+        if m.attention == "stream" and self.method not in stream:
+            raise ConfigError(
+                f"model.attention 'stream' applies to the methods {', '.join(stream)}; "
+                f"got method {self.method!r}"
+            )
         b = self.baseline
         for name in ("hidden", "embed_dim", "decoder_hidden"):
             _at_least(f"baseline.{name}", getattr(b, name), 1)
@@ -261,8 +270,13 @@ ADDED_SETTINGS: dict[tuple[str, str], Any] = {
     ("model", "embed_ln"): True,
     ("model", "init"): "default",
     ("model", "action_loss"): "ce",
+    ("model", "attention"): "window",
+    ("model", "memory"): None,
 }
 """Settings added after runs were first written, with the value that reproduces those runs."""
+PRESET_FREE = (("model", "attention"), ("model", "memory"))
+"""Added settings that the authors' preset leaves at their defaults (the streaming encoder
+is not part of the authors' loop; every other added setting is one of the preset's)."""
 
 
 def with_added_settings(saved: dict[str, Any]) -> dict[str, Any]:
