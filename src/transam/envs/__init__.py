@@ -4,7 +4,8 @@ Their names and modules are entries of :mod:`transam.registry`. Each module defi
 ``Config``, a :class:`Game` and ``make_env(config, population)``. Partner populations live in
 :mod:`transam.partners` (which may import this package, never the reverse);
 :func:`transam.make_env` composes a game with its population. Modules are imported lazily so
-that using one environment does not pay for the others' imports.
+that using one environment does not pay for the others' imports. :mod:`transam.envs.jaxmarl`
+turns a user's JaxMARL environment into such a game.
 """
 
 from __future__ import annotations
