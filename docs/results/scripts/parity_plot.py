@@ -3,9 +3,10 @@
 For each run directory (one seed, or ``seed_S/`` subdirectories of a multi-seed run): the
 evaluation return and the evaluation partner-action accuracy (newest window position) by
 training step, mean over seeds with a 95% t-interval, over the authors' single-seed curve
-(``curve.csv``: ``eval_return``, ``eval_action_accuracy_newest``). Writes ``parity.png`` and
-``parity.md`` (the window 400k-625k steps, where their curve levels off, and the first
-evaluation) into ``--out``.
+(``curve.csv``: ``eval_return``, ``eval_action_accuracy_newest``, ``policy_entropy``). Writes
+``parity.png`` and ``parity.md`` (the window 400k-625k steps, where their curve levels off, the
+first evaluation, and every 50k-step evaluation side by side, so unfinished runs compare too)
+into ``--out``.
 
     python docs/results/scripts/parity_plot.py --out docs/results/parity \
         "authors loop=runs/parity/authors" "our defaults=runs/parity/ours"
@@ -33,7 +34,11 @@ METRICS = (
         "eval_action_accuracy_newest",
         "partner-action accuracy (newest)",
     ),
+    ("train/entropy", "policy_entropy", "policy entropy (training)"),
 )
+"""(our metrics key, the authors' curve.csv column, title); the table uses the first two."""
+EVERY = 50_000
+"""Step spacing of the per-evaluation table."""
 WINDOW = (400_000, 625_000)
 
 
@@ -102,10 +107,12 @@ def main() -> None:
         runs[label] = seed_records(Path(path))
     args.out.mkdir(parents=True, exist_ok=True)
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4))
     rows = []
     for ax, (key, column, title) in zip(axes, METRICS, strict=True):
-        ax.plot(curve["controlled_steps"], curve[column], "k-", lw=1.5, label="authors (1 seed)")
+        if column in curve:
+            steps = curve["controlled_steps"]
+            ax.plot(steps, curve[column], "k-", lw=1.5, label="authors (1 seed)")
         for label, seeds in runs.items():
             steps, values = by_step(seeds, key)
             if not len(steps) or np.isnan(values).all():
@@ -124,7 +131,7 @@ def main() -> None:
     c_steps = curve["controlled_steps"]
     for label, seeds in [("authors (curve.csv)", None), *runs.items()]:
         row = [label, "1" if seeds is None else str(len(seeds))]
-        for key, column, _ in METRICS:
+        for key, column, _ in METRICS[:2]:
             if seeds is None:
                 first, win = curve[column][0], window_mean(c_steps, curve[column][None])
                 row += [f"{first:.3g}", f"{win[0]:.3g}"]
@@ -151,9 +158,29 @@ def main() -> None:
         "\n\nMean over seeds ± 95% t-interval; '400k-625k' is each seed's mean over its "
         "evaluations in that window (nan: the runs did not reach it). Figure: parity.png.\n"
     )
+    lines += ["", *step_table(curve, runs)]
     (args.out / "parity.md").write_text("\n".join(lines) + note)
     print("\n".join(lines))
     print(f"wrote {args.out / 'parity.png'} and {args.out / 'parity.md'}")
+
+
+def step_table(curve: dict[str, np.ndarray], runs: dict[str, Any]) -> list[str]:
+    """Markdown rows: at every EVERY steps, the authors' value and each run's mean ± CI."""
+    c_steps = (curve["controlled_steps"] // 1000 * 1000).astype(int)
+    head = ["step", "metric", "authors", *runs]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    reached = {label: by_step(seeds, "eval/return")[0] for label, seeds in runs.items()}
+    last = max((int(s[-1]) for s in reached.values() if len(s)), default=0)
+    for step in range(EVERY, last + 1, EVERY):
+        for key, column, title in METRICS:
+            theirs = curve[column][c_steps == step] if column in curve else np.array([])
+            row = [f"{step // 1000}k", title, f"{theirs[0]:.3g}" if len(theirs) else "-"]
+            for seeds in runs.values():
+                steps, values = by_step(seeds, key)
+                at = np.flatnonzero(steps == step)
+                row.append(_pm(*(float(v[0]) for v in mean_ci(values[:, at]))) if len(at) else "-")
+            out.append("| " + " | ".join(row) + " |")
+    return out
 
 
 def _pm(mean: float, ci: float) -> str:
