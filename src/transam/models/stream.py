@@ -45,11 +45,11 @@ from transam.models.transam import (
     TransAM,
     TransAMConfig,
     WindowCarry,
-    _check_local,
-    _entry,
     bert_init,
     block_sublayers,
+    check_local,
     step_tokens,
+    window_entry,
 )
 
 
@@ -148,7 +148,7 @@ class _StreamEncoder(nn.Module):
 def _init_params(model: StreamTransAM, key: jax.Array) -> Params:
     """Jitted, without the forward pass (as the window model's)."""
     key_enc, key_head = jax.random.split(key)
-    steps = jax.eval_shape(lambda: _entry(_dummy_steps(model.spec)))
+    steps = jax.eval_shape(lambda: window_entry(_dummy_steps(model.spec)))
     memory = jax.eval_shape(lambda: model.init_carry(model.spec))
     episode = jax.ShapeDtypeStruct((1,), jnp.int32)
     enc = model._encoder(True).lazy_init(key_enc, steps, memory, episode)["params"]
@@ -258,10 +258,10 @@ class StreamTransAM:
     ) -> tuple[StreamCarry, jax.Array]:
         """(carry, z_t): the carry emptied at an episode's first step, the step's tokens
         encoded against it and shifted in; dropout only when ``key`` is given."""
-        _check_local(x, self.spec, rollout=False)
+        check_local(x, self.spec, rollout=False)
         empty = self.init_carry(self.spec)
         carry = jax.tree.map(lambda e, c: jnp.where(x.first, e, c), empty, carry)
-        steps = jax.tree.map(lambda a: a[None], _entry(x))
+        steps = jax.tree.map(lambda a: a[None], window_entry(x))
         z, keys, values = self._encode(params, steps, carry, jnp.zeros((1,), jnp.int32), key)
         m = self.memory
         carry = StreamCarry(
@@ -275,9 +275,9 @@ class StreamTransAM:
         self, params: Params, carry: StreamCarry, xs: LocalStep, key: jax.Array | None = None
     ) -> jax.Array:
         """z [T, width]: one causal pass over the rollout with ``carry`` as fixed memory."""
-        _check_local(xs, self.spec, rollout=True)
+        check_local(xs, self.spec, rollout=True)
         episode = jnp.cumsum(xs.first.astype(jnp.int32))  # 0: the carry's episode
-        return self._encode(params, _entry(xs), carry, episode, key)[0]
+        return self._encode(params, window_entry(xs), carry, episode, key)[0]
 
     def decode(self, params: Params, z: jax.Array, other_obs: jax.Array | None = None) -> Decoded:
         return self.window.decode(params, z, other_obs)

@@ -160,7 +160,7 @@ class WindowCarry:
 _LOCAL_FIELDS = ("obs", "prev_action", "prev_reward", "t", "first")
 
 
-def _check_local(x: Any, spec: GameSpec, rollout: bool) -> None:
+def check_local(x: Any, spec: GameSpec, rollout: bool) -> None:
     """Refuse anything but a :class:`LocalStep` of the right shape (partner data included)."""
     if type(x) is not LocalStep:
         raise TypeError(
@@ -174,7 +174,7 @@ def _check_local(x: Any, spec: GameSpec, rollout: bool) -> None:
         raise ValueError(f"TransAM expects {where} with obs_dim {spec.obs_dim}; got {x.obs.shape}")
 
 
-def _entry(x: LocalStep) -> WindowCarry:
+def window_entry(x: LocalStep) -> WindowCarry:
     """One (or T) LocalStep(s) as buffer entries: no previous action/reward at an episode start."""
     return WindowCarry(
         obs=jnp.asarray(x.obs, jnp.float32),
@@ -510,10 +510,10 @@ class TransAM:
 
         Parameter-free, so a trainer can precompute carries without running the encoder.
         """
-        _check_local(x, self.spec, rollout=False)
+        check_local(x, self.spec, rollout=False)
         empty = self.init_carry(self.spec)
         carry = jax.tree.map(lambda e, c: jnp.where(x.first, e, c), empty, carry)
-        new = _entry(x)
+        new = window_entry(x)
         return jax.tree.map(lambda c, n: jnp.concatenate([c[1:], n[None]], axis=0), carry, new)
 
     def step(
@@ -527,11 +527,11 @@ class TransAM:
     def _windows(self, carry: WindowCarry, xs: LocalStep) -> WindowCarry:
         """All T windows of a rollout [T, K]: window i ends at ``xs[i]``, and entries from an
         earlier episode than its newest step are marked invalid (via the ``first`` flags)."""
-        _check_local(xs, self.spec, rollout=True)
+        check_local(xs, self.spec, rollout=True)
         k = self.config.context
         num_steps = xs.obs.shape[0]
         seq = jax.tree.map(
-            lambda c, n: jnp.concatenate([c[1:], n], axis=0), carry, _entry(xs)
+            lambda c, n: jnp.concatenate([c[1:], n], axis=0), carry, window_entry(xs)
         )  # [K-1+T]
         # Episode id along the sequence: the carry's valid entries all belong to one episode
         # (``push`` empties it at a boundary); each ``first`` in xs starts a new one.
