@@ -57,4 +57,4 @@ train authors --preset authors
 train ours ${OURS_EXTRA:-}
 
 python "$HERE/parity_plot.py" --curve "$CURVE" --out "$FIGURES" \
-  "authors loop=$OUT/authors" "our defaults=$OUT/ours"
+  "ours, --preset authors=$OUT/authors" "our defaults=$OUT/ours"
