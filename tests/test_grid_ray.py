@@ -19,7 +19,7 @@ from local_data import SMOKE_SEEDS as SEEDS
 
 from transam.reproduce import grid
 from transam.reproduce.grid_ray import connect, run_ray
-from transam.rundir import read_metrics
+from transam.rundir import EVAL_PARTNERS, read_metrics
 from transam.train.config import ConfigError
 
 SMOKE = grid.BUDGETS["smoke"]
@@ -40,7 +40,7 @@ def ray_session() -> Any:
 def run_files(out: Path, spec: grid.RunSpec) -> dict[str, Any]:
     run = out / spec.rel
     files: dict[str, Any] = {"metrics": read_metrics(run / "metrics.jsonl")}
-    for partners in grid.EVAL_PARTNERS:
+    for partners in EVAL_PARTNERS:
         files[partners] = json.loads((run / f"eval_{partners}.json").read_text())
     return files
 

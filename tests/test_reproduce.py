@@ -17,7 +17,7 @@ from local_data import SMOKE_SEEDS as SEEDS
 
 from transam.cli import main
 from transam.reproduce import grid
-from transam.rundir import read_metrics
+from transam.rundir import EVAL_PARTNERS, read_metrics
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +39,7 @@ def test_every_run_is_trained_and_evaluated(smoke: Path) -> None:
                 == ("eval/obs_mse" in rec)
                 == (spec.method == "liam")
             )
-        for partners in grid.EVAL_PARTNERS:
+        for partners in EVAL_PARTNERS:
             ev = json.loads((run / f"eval_{partners}.json").read_text())
             assert ev["episodes"] == grid.BUDGETS["smoke"].final_episodes
             assert ("action_accuracy_newest" in ev) == (spec.method == "liam")

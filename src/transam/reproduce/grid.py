@@ -31,7 +31,6 @@ from transam import registry
 from transam.train.config import ConfigError, EvalConfig, TrainConfig
 
 BudgetName = Literal["smoke", "small", "paper"]
-EVAL_PARTNERS: tuple[Literal["train", "heldout"], ...] = ("train", "heldout")
 
 
 @dataclass(frozen=True)
@@ -133,7 +132,7 @@ def run_one(out: str | Path, spec: RunSpec, budget: Budget) -> dict[str, Any]:
     """Train (or resume, or skip) one grid run, then evaluate it on the training and held-out
     partners where not done yet. Safe to call again after any failure; returns a summary."""
     from transam.evaluation.final import evaluate_run
-    from transam.rundir import checkpoints, evaluation_path
+    from transam.rundir import EVAL_PARTNERS, checkpoints, evaluation_path
     from transam.train.loop import train
 
     out = Path(out)

@@ -32,7 +32,7 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from transam.reproduce.grid import EVAL_PARTNERS, Budget, RunSpec, run_one
+from transam.reproduce.grid import Budget, RunSpec, run_one
 from transam.train.config import ConfigError
 
 RAY_MISSING = "Ray is not installed: pip install 'transam[ray]'"
@@ -205,7 +205,7 @@ def _describe(err: Exception) -> str:
 
 def _check_outputs(out: Path, spec: RunSpec) -> str:
     """'' when the run's outputs are all in --out as this machine sees it, else why not."""
-    from transam.rundir import evaluation_path
+    from transam.rundir import EVAL_PARTNERS, evaluation_path
 
     run_dir = out / spec.rel
     missing = [

@@ -25,6 +25,11 @@ EndBootstrap = Literal["zero", "return_mean"]
 PolicyInit = Literal["orthogonal", "torch"]
 
 
+def _methods_with(flag: str) -> list[str]:
+    """The registered methods whose entry sets ``flag`` (a boolean :class:`MethodEntry` field)."""
+    return [n for n in registry.method_names() if getattr(registry.method_entry(n), flag)]
+
+
 class ConfigError(EnvError):
     """A bad training setting: the message names the field, the value and the valid range."""
 
@@ -205,7 +210,7 @@ class TrainConfig:
                 "a2c.end_bootstrap 'return_mean' needs a2c.normalize_returns (the running "
                 "mean it bootstraps from)"
             )
-        dropout = [m for m in registry.method_names() if registry.method_entry(m).dropout]
+        dropout = _methods_with("dropout")
         if a.act_dropout and self.method not in dropout:
             raise ConfigError(
                 f"a2c.act_dropout applies to the methods {', '.join(dropout)}; "
@@ -231,7 +236,7 @@ class TrainConfig:
         _choice("model.attention", m.attention, ("window", "stream"))
         if m.memory is not None:
             _at_least("model.memory", m.memory, 1)
-        stream = [n for n in registry.method_names() if registry.method_entry(n).stream]
+        stream = _methods_with("stream")
         if m.attention == "stream" and self.method not in stream:
             raise ConfigError(
                 f"model.attention 'stream' applies to the methods {', '.join(stream)}; "

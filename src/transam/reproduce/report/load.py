@@ -21,13 +21,12 @@ import numpy as np
 
 from transam import registry
 from transam.models.base import LEGACY_METRICS
-from transam.rundir import evaluation_path, projection_path, read_metrics
+from transam.rundir import EVAL_PARTNERS, evaluation_path, projection_path, read_metrics
 from transam.train.config import ConfigError
 
 # The paper's order.
 ENV_ORDER: tuple[str, ...] = registry.PAPER_ENVS
 METHOD_ORDER: tuple[str, ...] = registry.PAPER_METHODS
-PARTNERS = ("train", "heldout")
 Status = Literal["missing", "unfinished", "finished"]
 
 
@@ -163,7 +162,7 @@ def read_run(out: Path, rel: str) -> RunData | None:
         first = final["seeds"][0]
         run.final = renamed(first) if isinstance(first, dict) and first else None
         run.final = run.final or (run.metrics[-1] if run.metrics else None)
-    for partners in PARTNERS:
+    for partners in EVAL_PARTNERS:
         path = evaluation_path(d, partners)
         ev = _read_json(path, run.problems)
         if isinstance(ev, dict) and isinstance(ev.get("return"), dict):
