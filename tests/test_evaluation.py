@@ -123,7 +123,7 @@ def test_config_round_trip_and_multi_seed_dirs(run_dir: Path, tmp_path: Path) ->
     write_json(old / "config.json", {**saved, "a2c": a2c})
     assert load_run_config(old).a2c.time_feature is False
     assert load_run_config(old).a2c.critic_z is True
-    assert (cfg.a2c.time_feature, cfg.a2c.critic_z) == (True, False)
+    assert (cfg.a2c.time_feature, cfg.a2c.critic_z) == (False, True)  # the authors' loop
 
 
 # ------------------------------------------------------------------ the evaluation of a run
@@ -140,6 +140,9 @@ def test_result_schema_and_files(run_dir: Path, result: dict[str, Any]) -> None:
     assert 0.0 <= result["action_accuracy_newest"] <= 1.0 and result["obs_mse"] > 0
     per = result["per_step"]
     assert {len(per[k]) for k in ("cum_return", "action_accuracy_newest", "obs_mse")} == {T}
+    # The policy's entropy per step lies in (0, ln 5]; its mean is the mean of the curve.
+    assert min(per["policy_entropy"]) > 0.0 and max(per["policy_entropy"]) <= np.log(5) + 1e-6
+    assert result["policy_entropy"] == pytest.approx(np.mean(per["policy_entropy"]), rel=1e-6)
     assert per["cum_return"][-1] == pytest.approx(result["return"]["mean"], rel=1e-9)
     # Spread's rewards are negative every step: the cumulative reward falls.
     assert all(b < a for a, b in zip(per["cum_return"], per["cum_return"][1:], strict=False))
@@ -247,7 +250,7 @@ def test_nam_has_no_decoder_metrics_and_no_probe(smoke_grid: Path, tmp_path: Pat
     for key in ("action_accuracy_newest", "action_accuracy_all_positions", "obs_mse", "probe"):
         assert key not in res
     assert "pca" not in res
-    assert set(res["per_step"]) == {"cum_return"} and res["step"] == 1000
+    assert set(res["per_step"]) == {"cum_return", "policy_entropy"} and res["step"] == 1000
     assert any("no learned embedding" in note for note in res["notes"])
     assert not (run / "eval_train_pca.npz").exists()
     assert (run / "eval_train.png").exists()

@@ -154,7 +154,8 @@ def test_nan_stops_the_run_naming_step_seed_and_quantity(tmp_path: Path) -> None
     out = tmp_path / "nan"
     # --a2c.lr 1e4 diverges within a few updates; 2-update chunks so one checkpoint exists.
     with pytest.raises(SystemExit) as exc:
-        main(cli_args(out, "--a2c.lr", "1e4", "--eval.every-episodes", "6"))
+        # (our earlier plain A2C: one update per rollout, so chunks of 2 updates)
+        main(cli_args(out, "--preset", "2026-11", "--a2c.lr", "1e4", "--eval.every-episodes", "6"))
     message = str(exc.value.code)
     match = re.search(r"seed 0: non-finite ([\w/, ]+) at update (\d+) \(step ([\d,]+)\)", message)
     assert match, message

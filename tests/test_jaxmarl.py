@@ -259,14 +259,15 @@ def test_example_trains_and_evaluates(tmp_path: Path, capsys: pytest.CaptureFixt
     out = tmp_path / "run"
     tiny = TransAMConfig(context=3, width=16, layers=1, heads=2, ff_width=32)
     try:
-        argv = ["--steps", "40", "--num-envs", "2", "--episodes", "4", "--out", str(out)]
+        # 50 steps: one collection of 5 rollouts x 5 steps x 2 envs
+        argv = ["--steps", "50", "--num-envs", "2", "--episodes", "4", "--out", str(out)]
         found = example.main(argv, model=tiny)
         assert registry.env_title(example.NAME) == "simple_adversary (JaxMARL)"
     finally:
         registry.unregister_env(example.NAME)
         sys.modules.pop("jaxmarl_adversary_example", None)
     assert (out / "final.json").exists()
-    assert json.loads((out / "metrics.jsonl").read_text().splitlines()[-1])["step"] == 40
+    assert json.loads((out / "metrics.jsonl").read_text().splitlines()[-1])["step"] == 50
     assert found["env"] == example.NAME and found["method"] == "transam"
     assert math.isfinite(found["return"]["mean"]) and math.isfinite(found["obs_mse"])
     assert set(found["per_partner_return"]) == {"covered", "decoyed", "alone", "lure"}

@@ -121,7 +121,7 @@ def test_a_registered_game_trains_and_evaluates(toy: None, tmp_path: Path) -> No
     config = transam.TrainConfig(
         env=TOY,  # type: ignore[arg-type]
         method=TOY_METHOD,  # type: ignore[arg-type]
-        total_steps=160,
+        total_steps=200,  # two collections of 5 rollouts x 5 steps x 4 envs
         out=str(tmp_path / "run"),
         progress=False,
         a2c=train_config.A2CConfig(num_envs=4),
@@ -130,7 +130,7 @@ def test_a_registered_game_trains_and_evaluates(toy: None, tmp_path: Path) -> No
     result = transam.train(config)
     assert result.finished and result.run_dir == tmp_path / "run"
     lines = (result.run_dir / "metrics.jsonl").read_text().splitlines()
-    assert lines and json.loads(lines[-1])["step"] == 160
+    assert lines and json.loads(lines[-1])["step"] == 200
     found = transam.evaluate_run(result.run_dir, episodes=4)
     assert found["env"] == TOY and 0.0 <= found["return"]["mean"] <= 4.0
     # unregistered, the name is unknown again

@@ -27,7 +27,7 @@ from transam.models.base import LocalStep
 from transam.models.policy import Policy
 from transam.models.transam import TransAMConfig
 from transam.rundir import RunDirError, _flag, read_metrics
-from transam.train import a2c
+from transam.train import a2c, presets
 from transam.train.config import A2CConfig, ConfigError, EvalConfig, TrainConfig
 from transam.train.episodes import make_evaluate
 from transam.train.loop import train
@@ -312,6 +312,12 @@ RUN_CHUNKS = 16
 
 
 def run_config(out: Path, chunks: int = RUN_CHUNKS, **kw: Any) -> TrainConfig:
+    """Our earlier plain A2C (``--preset 2026-11``: an update after every rollout), for which
+    the chunk size and the margin were tuned; the authors' loop has its own tests."""
+    return presets.apply(_run_config(out, chunks, **kw), "2026-11")
+
+
+def _run_config(out: Path, chunks: int, **kw: Any) -> TrainConfig:
     return TrainConfig(
         env="spread",
         method="nam",

@@ -21,7 +21,7 @@ from transam.registry import PAPER_ENVS, PAPER_METHODS, EnvName, MethodName
 from transam.train.config import ConfigError, TrainConfig
 from transam.train.presets import PRESET_NAMES
 
-PresetName = Literal["none", "authors"]
+PresetName = Literal["none", "authors", "2026-11"]
 
 
 console = Console()

@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # The deviation table (docs/results/parity/README.md): each of our departures from the
 # authors' loop, measured one at a time against the preset. Every run is `--preset authors`
-# with ONE setting put back to our default; same population, seeds, length and evaluation as
-# parity.sh, whose `authors` run is the baseline (run parity.sh first, or set BASELINE). Then
-# the table.
+# with ONE setting put back to our earlier default (--preset 2026-11); same population, seeds,
+# length and evaluation as parity.sh, whose `authors` run is the baseline (run parity.sh
+# first, or set BASELINE). The action-loss fix is parity.sh's `defaults` run (the defaults are
+# the preset with that one fix), read from PARITY. Then the table.
 #
-#   docs/results/scripts/deviations.sh                  all rows (14 runs of 3 seeds: long)
+#   docs/results/scripts/deviations.sh                  all rows (13 runs of 3 seeds: long)
 #   ONLY="clock critic_no_z" docs/results/scripts/deviations.sh     some rows
 #   SMOKE=1 docs/results/scripts/deviations.sh          5k steps, 2 seeds, default population
 # Re-running resumes unfinished runs and skips finished ones. Overrides as in parity.sh, plus
@@ -21,6 +22,7 @@ if [[ -n "${SMOKE:-}" ]]; then
   EVAL_EVERY=${EVAL_EVERY:-100}
   EVAL_EPISODES=${EVAL_EPISODES:-20}
   BASELINE=${BASELINE:-runs/parity-smoke/authors}
+  PARITY=${PARITY:-runs/parity-smoke}
   TABLE=${TABLE:-$OUT/deviations.md}
 else
   PARTNERS=${PARTNERS:-runs/authors-pop}
@@ -30,6 +32,7 @@ else
   EVAL_EVERY=${EVAL_EVERY:-1000}
   EVAL_EPISODES=${EVAL_EPISODES:-100}
   BASELINE=${BASELINE:-runs/parity/authors}
+  PARITY=${PARITY:-runs/parity}
   TABLE=${TABLE:-docs/results/parity/deviations.md}
 fi
 HERE=$(dirname "$0")
@@ -49,7 +52,6 @@ ROWS=(
   "token_layernorm|--model.embed-ln"
   "flax_init|--model.init default"
   "recon_in_rollout|--model.recon-at all"
-  "proper_action_ce|--model.action-loss ce"
 )
 
 selected() {
@@ -58,6 +60,9 @@ selected() {
 }
 
 args=()
+if selected proper_action_ce && [[ -f "$PARITY/defaults/config.json" ]]; then
+  args+=("proper_action_ce (--model.action-loss ce, the defaults)=$PARITY/defaults")
+fi
 for row in "${ROWS[@]}"; do
   name=${row%%|*}
   flags=${row#*|}

@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # Parity with the authors' TransAM loop on Spread (docs/results/parity/README.md).
 #
-# TransAM with the authors' loop (--preset authors) and with our defaults, against the
-# authors' Spread population, 3 vmapped seeds each, 625k steps, an evaluation every 25k
-# steps (1000 episodes' worth) on 100 episodes; then the figure of both against the authors'
-# measured curve (CURVE: not part of the repository, see docs/results/parity/README.md) in
-# docs/results/parity/.
+# TransAM with the authors' loop (--preset authors) and with our defaults (since 2026-12-01
+# the same loop with their action-loss bug fixed), against the authors' Spread population, 3
+# vmapped seeds each, 625k steps (the defaults run anneals over 10M steps like the preset: it is
+# the first 625k steps of a default 10M run), an evaluation every 25k steps (1000 episodes'
+# worth) on 100 episodes; then the figure of both against the authors' measured curve (CURVE:
+# not part of the repository, see docs/results/parity/README.md) in docs/results/parity/.
+# Set EARLIER=1 to add a run with our earlier defaults (--preset 2026-11).
 #
 # Before: import the population,
 #   transam partners import-authors spread PATH --out runs/authors-pop
@@ -15,7 +17,7 @@
 # Re-running resumes unfinished runs and skips finished ones. Environment overrides:
 #   TRANSAM (command), PARTNERS, OUT, STEPS, SEEDS, EVAL_EVERY (episodes), EVAL_EPISODES,
 #   CURVE (the authors' curve.csv), FIGURES (output folder), OURS_EXTRA (extra flags for the
-#   run with our defaults, e.g. "--a2c.anneal-steps 10000000" for the authors' lr schedule).
+#   run with our defaults).
 set -euo pipefail
 
 TRANSAM=${TRANSAM:-transam}
@@ -54,7 +56,11 @@ train() {  # train NAME [flags...]: one run directory per variant, resumed when 
 
 train authors --preset authors
 # shellcheck disable=SC2086  # OURS_EXTRA is a list of flags
-train ours ${OURS_EXTRA:-}
+train defaults --a2c.anneal-steps 10000000 ${OURS_EXTRA:-}
+runs=("ours, --preset authors=$OUT/authors" "our defaults=$OUT/defaults")
+if [[ -n "${EARLIER:-}" ]]; then
+  train earlier --preset 2026-11 --a2c.anneal-steps 10000000
+  runs+=("our earlier defaults (--preset 2026-11)=$OUT/earlier")
+fi
 
-python "$HERE/parity_plot.py" --curve "$CURVE" --out "$FIGURES" \
-  "ours, --preset authors=$OUT/authors" "our defaults=$OUT/ours"
+python "$HERE/parity_plot.py" --curve "$CURVE" --out "$FIGURES" "${runs[@]}"

@@ -6,10 +6,13 @@ training step, mean over seeds with a 95% t-interval, over the authors' single-s
 (``curve.csv``: ``eval_return``, ``eval_action_accuracy_newest``, ``policy_entropy``). Writes
 ``parity.png`` and ``parity.md`` (the window 400k-625k steps, where their curve levels off, the
 first evaluation, and every 50k-step evaluation side by side, so unfinished runs compare too)
-into ``--out``.
+into ``--out``, and ``curves.csv``: every evaluation of every seed of every run (label, seed,
+step and the metrics), so the figure can be redrawn and compared without the run directories,
+which are not part of the repository: a run given as ``LABEL=path/curves.csv`` is read from
+such a file (its rows with that label).
 
     python docs/results/scripts/parity_plot.py --out docs/results/parity \
-        "authors loop=runs/parity/authors" "our defaults=runs/parity/ours"
+        "authors loop=runs/parity/authors" "our defaults=runs/parity/defaults"
 """
 
 from __future__ import annotations
@@ -42,8 +45,24 @@ EVERY = 50_000
 WINDOW = (400_000, 625_000)
 
 
-def seed_records(run: Path) -> list[list[dict[str, Any]]]:
-    """metrics.jsonl records of each seed of the run in ``run``."""
+CSV_KEYS = ("eval/return", "eval/action_accuracy_newest", "train/entropy", "eval/policy_entropy")
+"""The metrics kept in curves.csv (a column each, named after the key)."""
+
+
+def seed_records(run: Path, label: str = "") -> list[list[dict[str, Any]]]:
+    """metrics.jsonl records of each seed of the run in ``run`` (or, for a curves.csv, the
+    rows labelled ``label``)."""
+    if run.suffix == ".csv":
+        seeds: dict[str, list[dict[str, Any]]] = {}
+        with run.open() as f:
+            for r in csv.DictReader(f):
+                if r["label"] == label:
+                    rec = {"step": int(r["step"])}
+                    rec.update({k: float(r[k]) for k in CSV_KEYS if r.get(k) not in ("", None)})
+                    seeds.setdefault(r["seed"], []).append(rec)
+        if not seeds:
+            raise SystemExit(f"no rows labelled {label!r} in {run}")
+        return list(seeds.values())
     files = sorted(run.glob("seed_*/metrics.jsonl")) or [run / "metrics.jsonl"]
     out = []
     for f in files:
@@ -104,8 +123,9 @@ def main() -> None:
     runs = {}
     for spec in args.runs:
         label, _, path = spec.partition("=")
-        runs[label] = seed_records(Path(path))
+        runs[label] = seed_records(Path(path), label)
     args.out.mkdir(parents=True, exist_ok=True)
+    write_curves(args.out / "curves.csv", runs)
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4))
     rows = []
@@ -162,6 +182,23 @@ def main() -> None:
     (args.out / "parity.md").write_text("\n".join(lines) + note)
     print("\n".join(lines))
     print(f"wrote {args.out / 'parity.png'} and {args.out / 'parity.md'}")
+
+
+def write_curves(path: Path, runs: dict[str, list[list[dict[str, Any]]]]) -> None:
+    """Every evaluation of every seed of every run, one row each."""
+    rows = []
+    for label, seeds in runs.items():
+        for i, records in enumerate(seeds):
+            for r in records:
+                if "eval/return" in r:
+                    vals = [r.get(k, "") for k in CSV_KEYS]
+                    rows.append([label, i, r["step"], *vals])
+    tmp = path.with_suffix(".tmp")  # the input may be this very file
+    with tmp.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["label", "seed", "step", *CSV_KEYS])
+        w.writerows(rows)
+    tmp.replace(path)
 
 
 def step_table(curve: dict[str, np.ndarray], runs: dict[str, Any]) -> list[str]:

@@ -36,8 +36,9 @@ and ``trained_population_digest`` (the shipped population's fingerprint now and 
 partners.json's; None for scripted partners or runs older than that file), ``checkpoint`` (path
 relative to the run directory: the named one, or the newest that verifies, any newer one that
 does not being named in ``notes``), ``step``, ``episodes``, ``greedy``, ``return`` {mean, std},
-the :data:`EVAL_METRICS` the model predicts, ``per_partner_return`` {team: mean},
-``per_step`` {cum_return, and a curve per metric present},
+the :data:`EVAL_METRICS` the model predicts, ``policy_entropy`` (the policy's mean entropy
+per step, nats), ``per_partner_return`` {team: mean},
+``per_step`` {cum_return, and a curve per metric present, policy_entropy included},
 ``probe`` {accuracy, per_step, chance, train_episodes, test_episodes, features, ridge} and
 ``pca`` {explained_variance} (both absent without an embedding), ``notes`` [str].
 """
@@ -76,6 +77,7 @@ from transam.rundir import (
     write_json,
 )
 from transam.train.config import ConfigError, TrainConfig
+from transam.train.episodes import POLICY_ENTROPY
 
 EVAL_METRICS = (ACC_NEWEST, ACC_ALL, "obs_mse", MSE_ALL)
 """The agent-modeling metrics an evaluation may hold (older files: ``action_accuracy``, the
@@ -242,7 +244,7 @@ def _evaluate_locked(
         "return": {"mean": float(returns.mean()), "std": float(returns.std())},
     }
     per_step: dict[str, Any] = {"cum_return": [float(v) for v in reward.cumsum(0).mean(1)]}
-    for key in EVAL_METRICS:
+    for key in (*EVAL_METRICS, POLICY_ENTROPY):
         if key in ep.scores:
             score = np.asarray(ep.scores[key], np.float64)
             out[key] = float(score.sum() / live.sum())

@@ -79,7 +79,8 @@ from transam.models.heads import ImitationHead
 
 @dataclass(frozen=True)
 class TransAMConfig:
-    """TransAM encoder and reconstruction-head settings (defaults: the reference settings)."""
+    """TransAM encoder and reconstruction-head settings (defaults: the authors' model, with
+    their action-loss bug fixed)."""
 
     context: int = 5
     """K, the window in steps (3K tokens: reward, action, observation per step)"""
@@ -97,24 +98,24 @@ class TransAMConfig:
     """post-norm (BERT, as the authors' code) or pre-norm blocks"""
     causal: bool = False
     """causal attention inside the window (the paper's encoder attends to the whole window)"""
-    recon_at: Literal["all", "window", "last"] = "all"
-    """reconstruct at every valid observation position of each window that holds a step of
-    this rollout ('all'), at every valid position whose targets the trainer has, steps of
-    the rollouts collected before it included ('window', the authors' code), or only at the
-    newest ('last'); ignored with ``pool="mean"`` (one pooled z per window)"""
+    recon_at: Literal["all", "window", "last"] = "window"
+    """reconstruct at every valid position whose targets the trainer has, steps of the
+    rollouts collected before it included ('window', default, the authors' code), at every
+    valid observation position of each window that holds a step of this rollout ('all'), or
+    only at the newest ('last'); ignored with ``pool="mean"`` (one pooled z per window)"""
     tokens: Literal["separate", "fuse"] = "separate"
     """a token per modality (r, a, o: 3K tokens) or one fused token per step (TransAM-fuse)"""
     pool: Literal["last", "mean"] = "last"
     """z = the newest observation-token output, or their mean over the window (TransAM-pool)"""
     decoder: Literal["reconstruct", "imitate"] = "reconstruct"
     """reconstruct others' observations and actions, or imitate their actions (TransAM-im)"""
-    embed_ln: bool = True
+    embed_ln: bool = False
     """LayerNorm on the stacked tokens before the first block (the authors' model defines
-    one but never applies it; the encoder gets the summed embeddings as they are)"""
-    init: Literal["default", "authors"] = "default"
-    """initialisation: flax defaults (LeCun normal kernels, zero biases), or the authors'
-    (encoder blocks N(0, 0.02) with zero biases as BERT; token embeddings and heads PyTorch's
-    uniform +-1/sqrt(fan_in); position embedding N(0, 1))"""
+    one but never applies it, default: the encoder gets the summed embeddings as they are)"""
+    init: Literal["default", "authors"] = "authors"
+    """initialisation: the authors' (default: encoder blocks N(0, 0.02) with zero biases as
+    BERT; token embeddings and heads PyTorch's uniform +-1/sqrt(fan_in); position embedding
+    N(0, 1)), or flax defaults (LeCun normal kernels, zero biases)"""
     action_loss: Literal["ce", "authors"] = "ce"
     """the action term: mean over the other agents of the cross-entropy over actions ('ce'),
     or the authors' bug ('authors'): PyTorch's cross-entropy applied to softmax outputs

@@ -15,28 +15,27 @@ Data flow per step (the execution path sees only :class:`LocalStep` data)::
 
 Each rollout stores the carries it started from, so the training path (``policy.unroll``,
 ``model.loss`` and, with ``backprop_encoder``, ``model.embed_rollout``) recomputes exactly what
-acting computed, with gradients. Without ``backprop_encoder`` the policy loss reuses the stored
-execution-path z (no second encoder pass). The one deliberate recomputation is the bootstrap
-step on the rollout's last observation: acting on it again after the update (with the new
-parameters) keeps the next rollout exactly on-policy, as PureJaxRL and SB3 do.
+acting computed, with gradients. With ``recompute_z`` (default) the policy loss reads z
+recomputed by the model's current parameters, as the reference does; without it, the stored
+execution-path z (no second encoder pass).
 
 Episodes end by time limit or termination alike (``done``); no bootstrapping across ``done``,
-as in the reference A2C (``end_bootstrap="return_mean"``: at a time limit, from the running
-mean of returns, which is what the reference's code does). So that the critic can see a time
-limit coming, the policy input includes the agent's clock t / episode_len (``time_feature``;
-the reference has none). With
-``normalize_returns`` the critic predicts standardised returns (running mean/std of the GAE
-returns) and advantages are divided by the same std. The value loss is 0.5 * squared error
-(the paper's A2C objective) times ``vf_coef``. Steps are controlled-agent steps summed over
-parallel environments.
+as in the reference A2C; at a time limit the return bootstraps from the running mean of returns
+(``end_bootstrap="return_mean"``, what the reference's code does; ``"zero"``: the end is
+terminal). With ``normalize_returns`` the critic predicts standardised returns (running
+mean/std of the GAE returns) and advantages are on the same scale. Steps are controlled-agent
+steps summed over parallel environments.
 
-The reference's scheme (``rollouts_per_collect`` C > 1, see :func:`make_update`): C rollouts
-are collected with the same parameters (returns and the return normaliser computed rollout by
-rollout as they come in), then C updates run in order, update c on rollout c, each from the
-policy carry and window that acting had at the start of rollout c. The settings
-``advantage``, ``value_loss``, ``end_bootstrap``, ``act_dropout``, ``recompute_z`` and the
-model's ``recon_at="window"`` reproduce the rest of the reference's update
-(:mod:`transam.train.presets`).
+The defaults are the reference's scheme (``rollouts_per_collect`` C = 5, see
+:func:`make_update`): C rollouts are collected with the same parameters (returns and the return
+normaliser computed rollout by rollout as they come in), then C updates run in order, update c
+on rollout c, each from the policy carry and window that acting had at the start of rollout c;
+the advantage is the normalised return minus the value recomputed in the update, the value
+loss (R - V)^2, z is recomputed by the update (``recompute_z``) with the encoder's dropout on
+(``act_dropout``), and the model reconstructs at ``recon_at="window"``. C = 1, ``advantage="gae"``
+and the other alternatives are each one setting away (docs/methods.md lists them and what
+each was measured to do; ``time_feature`` adds the agent's clock t / episode_len to the policy
+input, which the reference does not have).
 """
 
 from __future__ import annotations
@@ -284,7 +283,7 @@ def make_rollout(
 ) -> Callable[[RunnerState, jax.Array], tuple[RunnerState, Trajectory]]:
     """``(state, key) -> (state after n_steps, trajectory)`` (pure; not jitted)."""
     policy = make_policy(config, env)
-    dropout = config.a2c.act_dropout
+    dropout = config.acting_dropout
 
     def rollout(rs: RunnerState, key: jax.Array) -> tuple[RunnerState, Trajectory]:
         def body(carry: tuple[Any, ...], key: jax.Array) -> tuple[tuple[Any, ...], Any]:
@@ -426,7 +425,7 @@ def make_collect(
 
     def one(rs: RunnerState, key: jax.Array) -> tuple[RunnerState, Collected]:
         rs, traj = rollout(rs, key)
-        k_drop = jax.random.fold_in(key, 1) if a.act_dropout else None
+        k_drop = jax.random.fold_in(key, 1) if config.acting_dropout else None
         _, _, _, _, last_value = act(
             policy,
             model,
@@ -516,7 +515,7 @@ def make_update(
         if prior_k:
             prior["prior"], prior["prior_ok"] = _prior_records(records, index, prior_k)
         z_keys = None
-        if a.act_dropout:  # the policy's z is recomputed (or back-propagated) with dropout
+        if config.acting_dropout:  # the policy's z is recomputed (or back-propagated) with dropout
             z_keys = jax.random.split(jax.random.fold_in(key, 1), traj.x.first.shape[1])
 
         def embed(model_params: Any) -> jax.Array:

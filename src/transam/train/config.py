@@ -1,4 +1,5 @@
-"""Typed training configuration (defaults: the spec's reference settings plus the policy clock).
+"""Typed training configuration (defaults: the authors' training loop, setting by setting, with
+their action-loss bug fixed; each of our alternatives is one flag away, docs/methods.md).
 
 Every setting is a field with a docstring, so ``transam train --help`` lists it. :meth:`validate`
 checks everything up front and raises one :class:`ConfigError` naming the bad value and the
@@ -49,7 +50,7 @@ class A2CConfig:
     ent_coef: float = 0.01
     """entropy bonus coefficient (beta)"""
     vf_coef: float = 1.0
-    """value-loss coefficient (the value loss is 0.5 * squared error, as in the paper)"""
+    """value-loss coefficient (on the value loss of ``value_loss``)"""
     normalize_advantages: bool = False
     """standardise advantages per rollout (the reference A2C does not)"""
     lr: float = 3e-4
@@ -71,46 +72,50 @@ class A2CConfig:
     """let the RL loss back-propagate into the agent model (reference: it does not)"""
     hidden: int = 128
     """LSTM and linear-layer width of the policy"""
-    critic_z: bool = False
-    """the critic reads the embedding z through the trunk it shares with the actor (the
-    reference, the paper's V(o, E^o)). Off (default): the critic is its own LSTM on o_t (and
-    the clock) only; the actor still conditions on z. With the reference's shared trunk the
-    encoder methods' policies collapse early on Spread, below random play; with the critic on
-    its own they do not (docs/notes/2026-11-encoder-collapse-critic-z.md)"""
-    time_feature: bool = True
+    critic_z: bool = True
+    """the critic reads the embedding z through the trunk it shares with the actor (default:
+    the reference, the paper's V(o, E^o)). Off: the critic is its own LSTM on o_t (and the
+    clock) only; the actor still conditions on z. On the earlier Spread setup (sampling
+    partners, with the clock) the shared trunk collapsed the encoder methods' policies below
+    random play (docs/notes/2026-11-encoder-collapse-critic-z.md); on the authors' setup,
+    without the clock, it does not (docs/results/parity)"""
+    time_feature: bool = False
     """append the agent's own clock t / episode_len to the policy input (actor and critic).
-    The reference does not, and treats the time limit as terminal: its critic cannot tell the
-    last steps of an episode from the first and overestimates the future there, which biases
-    every end-of-episode advantage (docs/notes/2026-11-critic-end-of-episode-bias.md)"""
-    rollouts_per_collect: int = 1
+    The reference does not (default), and its critic cannot tell the last steps of an episode
+    from the first (docs/notes/2026-11-critic-end-of-episode-bias.md)"""
+    rollouts_per_collect: int = 5
     """rollouts collected with the same parameters before learning from them; then one update
-    per rollout, in order, each starting from the LSTM state and window acting had (reference:
-    5, a whole 25-step Spread episode as five 5-step rollouts, then five updates)"""
-    advantage: AdvantageForm = "gae"
-    """the policy-gradient advantage: the GAE advantage of acting's values ('gae'), or the
-    value target minus the critic's value recomputed in the update ('recomputed', the
-    reference: normalised return minus V)"""
-    value_loss: ValueLossForm = "half_squared"
-    """value loss per step: 0.5 (R - V)^2 (the paper) or (R - V)^2 (the reference)"""
-    end_bootstrap: EndBootstrap = "zero"
-    """what the return bootstraps from where an episode ends by its time limit: nothing
-    ('zero': the end is terminal) or the running mean of returns ('return_mean', the
-    reference: its zero bootstrap is in normalised units and is de-normalised with the
-    rest; needs normalize_returns)"""
+    per rollout, in order, each starting from the LSTM state and window acting had (default,
+    the reference: 5, a whole 25-step Spread episode as five 5-step rollouts, then five
+    updates; 1 is plain A2C: rollout, update)"""
+    advantage: AdvantageForm = "recomputed"
+    """the policy-gradient advantage: the value target minus the critic's value recomputed in
+    the update ('recomputed', default, the reference: normalised return minus V), or the GAE
+    advantage of acting's values ('gae')"""
+    value_loss: ValueLossForm = "squared"
+    """value loss per step: (R - V)^2 (default, the reference) or 0.5 (R - V)^2 (the paper's
+    notation)"""
+    end_bootstrap: EndBootstrap = "return_mean"
+    """what the return bootstraps from where an episode ends by its time limit: the running
+    mean of returns ('return_mean', default, the reference: its zero bootstrap is in
+    normalised units and is de-normalised with the rest; needs normalize_returns) or nothing
+    ('zero': the end is terminal)"""
     anneal_steps: int = 0
     """with anneal_lr, the steps over which the policy learning rate falls to 0 (0: the
     run's total_steps; the reference anneals over its total_timesteps, 10M by default, also
     when stopped earlier)"""
-    init: PolicyInit = "orthogonal"
-    """policy initialisation: orthogonal (gain sqrt 2, actor 0.01, critic 1; flax LSTM
-    defaults) or PyTorch's defaults (the reference: uniform +-1/sqrt(fan_in) everywhere, two
-    LSTM biases)"""
-    act_dropout: bool = False
+    init: PolicyInit = "torch"
+    """policy initialisation: PyTorch's defaults (default, the reference: uniform
+    +-1/sqrt(fan_in) everywhere, two LSTM biases) or orthogonal (gain sqrt 2, actor 0.01,
+    critic 1; flax LSTM defaults)"""
+    act_dropout: bool = True
     """keep the agent model's dropout on wherever z is computed: acting, bootstrapping,
-    evaluation (the reference never switches its encoder to eval mode). TransAM family only"""
-    recompute_z: bool = False
+    evaluation (default: the reference never switches its encoder to eval mode). Only the
+    TransAM family has dropout; for the other methods this changes nothing"""
+    recompute_z: bool = True
     """the policy loss recomputes z with the agent model's current parameters (with dropout
-    under act_dropout) instead of reusing the z acting saw (the reference recomputes)"""
+    under act_dropout) instead of reusing the z acting saw (default: the reference
+    recomputes)"""
 
 
 @dataclass(frozen=True)
@@ -172,6 +177,12 @@ class TrainConfig:
     """evaluation settings"""
 
     @property
+    def acting_dropout(self) -> bool:
+        """Whether z is computed with dropout on outside the model's own loss: ``act_dropout``
+        and a method whose model has dropout (the registry's ``dropout`` flag)."""
+        return self.a2c.act_dropout and registry.method_entry(self.method).dropout
+
+    @property
     def run_dir(self) -> str:
         return self.out or f"runs/{self.env}-{self.method}-s{self.seed}"
 
@@ -209,12 +220,6 @@ class TrainConfig:
             raise ConfigError(
                 "a2c.end_bootstrap 'return_mean' needs a2c.normalize_returns (the running "
                 "mean it bootstraps from)"
-            )
-        dropout = _methods_with("dropout")
-        if a.act_dropout and self.method not in dropout:
-            raise ConfigError(
-                f"a2c.act_dropout applies to the methods {', '.join(dropout)}; "
-                f"got method {self.method!r}"
             )
         m = self.model
         _at_least("model.context (K)", m.context, 1)

@@ -20,7 +20,8 @@ metric); ``obs_mse`` likewise. With ``positions=True`` (the final evaluation onl
 each window a second time) a model that decodes every window position (TransAM, -fuse, -im)
 also gets ``action_accuracy_all_positions`` / ``obs_mse_all_positions``: per step, the mean
 over the valid positions of the window ending there (each against its own step's partners),
-then averaged over steps like the others (each window weighs the same). Per-step curves over
+then averaged over steps like the others (each window weighs the same). Every step also scores the
+policy's entropy (:data:`POLICY_ENTROPY`). Per-step curves over
 the in-episode time are returned too (``per_step/...``) for later reports.
 
 :func:`make_episodes` is the one rollout both use: it returns the per-step arrays (reward, live
@@ -42,6 +43,10 @@ from transam.models.base import ACC_ALL, ACC_NEWEST, MSE_ALL, AgentModel
 from transam.models.transam import TransAM
 from transam.train.a2c import act, batch_carry, env_step, first_step, make_policy
 from transam.train.config import TrainConfig
+
+POLICY_ENTROPY = "policy_entropy"
+"""The per-step score of the policy's own entropy (nats; every method has it): where in the
+episode the policy is decided and where it is near uniform."""
 
 EvalFn = Callable[[Any, Any, jax.Array], dict[str, jax.Array]]
 
@@ -72,7 +77,7 @@ def make_episodes(
     window = model if positions and isinstance(model, TransAM) and model.decodes_positions else None
     k = window.config.context if window is not None else 1
     spec = env.spec
-    dropout = config.a2c.act_dropout
+    dropout = config.acting_dropout
 
     def episodes(
         policy_params: Any, model_params: Any, key: jax.Array, partner: jax.Array | None = None
@@ -107,11 +112,12 @@ def make_episodes(
                 action = jax.random.categorical(k_act, logits).astype(jnp.int32)
             env_state, ts, x = env_step(env, k_env, env_state, action)
             live = alive.astype(jnp.float32)
+            logp = jax.nn.log_softmax(logits)
+            scores = {POLICY_ENTROPY: -(jnp.exp(logp) * logp).sum(-1) * live}
             rec = ts.record
             obs_pred, act_logits = jax.vmap(model.decode, in_axes=(None, 0, 0))(
                 model_params, z, rec.other_obs
             )
-            scores = {}
             if act_logits is not None:
                 correct = jnp.argmax(act_logits, -1) == rec.other_actions
                 scores[ACC_NEWEST] = correct.mean(-1) * live
@@ -144,9 +150,10 @@ def make_episodes(
 
 def make_evaluate(config: TrainConfig, env: ControlledEnv, model: AgentModel) -> EvalFn:
     """A jitted ``(policy_params, model_params, key) -> metrics`` over ``config.eval.episodes``
-    episodes (partners drawn uniformly). Metrics: ``return`` (mean), ``return_std`` and, with
-    a decoder, ``action_accuracy_newest`` and ``obs_mse`` where the model predicts them (no
-    all-positions metrics here: training logs them from the model's loss)."""
+    episodes (partners drawn uniformly). Metrics: ``return`` (mean), ``return_std``,
+    ``policy_entropy`` (mean over steps) and, with a decoder, ``action_accuracy_newest`` and
+    ``obs_mse`` where the model predicts them (no all-positions metrics here: training logs
+    them from the model's loss)."""
     episodes = make_episodes(config, env, model, config.eval.episodes)
 
     def evaluate(policy_params: Any, model_params: Any, key: jax.Array) -> dict[str, jax.Array]:

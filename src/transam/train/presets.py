@@ -2,6 +2,8 @@
 still overrides a single setting (``--preset authors --a2c.time-feature`` is the authors' loop
 with our clock), so each deviation can be measured on its own.
 
+``2026-11``: our defaults until 2026-12-01, which every earlier result under docs/ ran with.
+
 ``authors``: the first author's TransAM training loop on Spread as their public script runs it
 (conor-wallace/agent-transformer @ 62f58f7, ``a2c_lstm_transformer_spread.py`` with the
 ``opponent_models.BERTRAOOpponentTransformer`` it builds), setting by setting. Each entry
@@ -153,7 +155,30 @@ AUTHORS: tuple[Setting, ...] = (
 )
 """The authors' training loop (see the module docstring)."""
 
-PRESETS: dict[str, tuple[Setting, ...]] = {"authors": AUTHORS}
+EARLIER = (
+    "defaults before 2026-12-01 (docs/results/parity/README.md: replaced by the authors' loop)"
+)
+
+BEFORE_PARITY: tuple[Setting, ...] = (
+    Setting("a2c.rollouts_per_collect", 1, EARLIER + "; plain A2C: rollout, update"),
+    Setting("a2c.advantage", "gae", EARLIER),
+    Setting("a2c.value_loss", "half_squared", EARLIER),
+    Setting("a2c.end_bootstrap", "zero", EARLIER),
+    Setting("a2c.critic_z", False, EARLIER + "; docs/notes/2026-11-encoder-collapse-critic-z.md"),
+    Setting(
+        "a2c.time_feature", True, EARLIER + "; docs/notes/2026-11-critic-end-of-episode-bias.md"
+    ),
+    Setting("a2c.init", "orthogonal", EARLIER),
+    Setting("a2c.act_dropout", False, EARLIER),
+    Setting("a2c.recompute_z", False, EARLIER),
+    Setting("model.embed_ln", True, EARLIER),
+    Setting("model.init", "default", EARLIER),
+    Setting("model.recon_at", "all", EARLIER),
+)
+"""Our own training settings until the parity study (every result under docs/ dated before
+2026-12-01 ran with them): the authors' loop with the deviations the deviation table measures."""
+
+PRESETS: dict[str, tuple[Setting, ...]] = {"authors": AUTHORS, "2026-11": BEFORE_PARITY}
 PRESET_NAMES: tuple[str, ...] = ("none", *PRESETS)
 
 
