@@ -565,3 +565,19 @@ def test_anneal_over_anneal_steps_not_the_run() -> None:
     first, _ = tx.update({"w": jnp.ones(())}, state, params)
     np.testing.assert_allclose(abs(float(first["w"])), 3e-4, rtol=1e-3)
     assert abs(float(step["w"])) == pytest.approx(3e-4 * (1 - 12_499 / 200_000), rel=1e-2)
+
+
+def test_the_2026_11_preset_is_our_earlier_defaults() -> None:
+    """Every setting our earlier defaults had that the authors' loop changed: those in
+    ADDED_SETTINGS (each with the value runs had before it existed, which were our defaults),
+    and the clock and the z-free critic."""
+    earlier = presets.apply(TrainConfig(), "2026-11").validate()
+    skip = ("time_feature", "critic_z", "anneal_steps", "action_loss")
+    for (group, name), value in ADDED_SETTINGS.items():
+        if (group, name) not in PRESET_FREE and name not in skip:
+            assert getattr(getattr(earlier, group), name) == value, name
+    assert earlier.a2c.time_feature and not earlier.a2c.critic_z
+    assert earlier.model.action_loss == "ce" and earlier.a2c.anneal_steps == 0
+    # From the command line too.
+    cli = tyro.cli(command("2026-11"), args=["train", "--preset", "2026-11"])
+    assert cli.a2c == earlier.a2c and cli.model == earlier.model

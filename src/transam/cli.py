@@ -250,8 +250,10 @@ class Train(TrainConfig):
 
     preset: PresetName = "none"
     """start from a named set of settings, then apply the other flags: 'authors' is the first
-    author's Spread training loop (transam.train.presets, docs/methods.md);
-    `--preset authors --help` shows its values as the defaults"""
+    author's Spread training loop as their script runs it (the defaults are the same loop with
+    their action-loss bug fixed), '2026-11' our defaults before 2026-12-01
+    (transam.train.presets, docs/methods.md); `--preset NAME --help` shows its values as the
+    defaults"""
 
     def run(self) -> None:
         _run_train(TrainConfig(**{f.name: getattr(self, f.name) for f in fields(TrainConfig)}))
@@ -259,10 +261,10 @@ class Train(TrainConfig):
 
 @dataclass(frozen=True)
 class Demo(TrainConfig):
-    """The main job on built-in defaults: a short TransAM training run on Spread (the reference
-    settings, a few minutes on 2 CPU cores). Prints the evaluation during and after training
-    next to a uniformly random agent on the same evaluation episodes, and where the outputs
-    are. Every `transam train` option applies."""
+    """The main job on built-in defaults: a short TransAM training run on Spread (the default
+    settings, the authors' training loop; a few minutes on 2 CPU cores). Prints the evaluation
+    during and after training next to a uniformly random agent on the same evaluation episodes,
+    and where the outputs are. Every `transam train` option applies."""
 
     total_steps: int = 50_000
     """controlled-agent environment steps, summed over parallel envs"""

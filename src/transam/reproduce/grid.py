@@ -97,7 +97,7 @@ def grid_specs(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int]
 
 
 def run_config(spec: RunSpec, budget: Budget, out: str | Path) -> TrainConfig:
-    """The training configuration of one grid run: the reference settings plus the budget."""
+    """The training configuration of one grid run: the default settings plus the budget."""
     # the registry's episode length: a grid is planned without building environments
     episode_len = registry.env_entry(spec.env).episode_len
     every = max(1, round(budget.total_steps / (budget.evals * episode_len)))
