@@ -368,6 +368,12 @@ def gae(
     return adv, adv + value
 
 
+def policy_entropy(logits: jax.Array) -> jax.Array:
+    """The categorical policy's entropy (nats) per row of ``logits`` [..., actions]."""
+    logp = jax.nn.log_softmax(logits)
+    return -(jnp.exp(logp) * logp).sum(-1)
+
+
 def a2c_losses(
     policy: Policy,
     policy_params: Any,
@@ -388,7 +394,7 @@ def a2c_losses(
     _, logits, values = policy.unroll(policy_params, traj.policy_carry0, traj.x, z)
     logp_all = jax.nn.log_softmax(logits)
     logp = jnp.take_along_axis(logp_all, traj.action[..., None], axis=-1)[..., 0]
-    entropy = -(jnp.exp(logp_all) * logp_all).sum(-1).mean()
+    entropy = policy_entropy(logits).mean()
     if advantage == "recomputed":
         advantages = targets - values
     advantages = jax.lax.stop_gradient(advantages)

@@ -20,9 +20,9 @@ metric); ``obs_mse`` likewise. With ``positions=True`` (the final evaluation onl
 each window a second time) a model that decodes every window position (TransAM, -fuse, -im)
 also gets ``action_accuracy_all_positions`` / ``obs_mse_all_positions``: per step, the mean
 over the valid positions of the window ending there (each against its own step's partners),
-then averaged over steps like the others (each window weighs the same). Every step also scores the
-policy's entropy (:data:`POLICY_ENTROPY`). Per-step curves over
-the in-episode time are returned too (``per_step/...``) for later reports.
+then averaged over steps like the others (each window weighs the same). Every step also
+scores the policy's entropy (:data:`POLICY_ENTROPY`). Per-step curves over the in-episode time
+are returned too (``per_step/...``) for later reports.
 
 :func:`make_episodes` is the one rollout both use: it returns the per-step arrays (reward, live
 mask, scores, embeddings z, partner ids), and :func:`make_evaluate` reduces them to the
@@ -41,7 +41,14 @@ from flax import struct
 from transam.envs.core import ControlledEnv
 from transam.models.base import ACC_ALL, ACC_NEWEST, MSE_ALL, AgentModel
 from transam.models.transam import TransAM
-from transam.train.a2c import act, batch_carry, env_step, first_step, make_policy
+from transam.train.a2c import (
+    act,
+    batch_carry,
+    env_step,
+    first_step,
+    make_policy,
+    policy_entropy,
+)
 from transam.train.config import TrainConfig
 
 POLICY_ENTROPY = "policy_entropy"
@@ -112,8 +119,7 @@ def make_episodes(
                 action = jax.random.categorical(k_act, logits).astype(jnp.int32)
             env_state, ts, x = env_step(env, k_env, env_state, action)
             live = alive.astype(jnp.float32)
-            logp = jax.nn.log_softmax(logits)
-            scores = {POLICY_ENTROPY: -(jnp.exp(logp) * logp).sum(-1) * live}
+            scores = {POLICY_ENTROPY: policy_entropy(logits) * live}
             rec = ts.record
             obs_pred, act_logits = jax.vmap(model.decode, in_axes=(None, 0, 0))(
                 model_params, z, rec.other_obs
