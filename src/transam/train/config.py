@@ -147,7 +147,7 @@ class TrainConfig:
     import-authors`)"""
     total_steps: int = 10_000_000
     """controlled-agent environment steps, summed over parallel envs (rounded up to whole
-    updates)"""
+    collections of num_envs x n_steps x rollouts_per_collect steps: 250 by default)"""
     seed: int = 0
     """PRNG seed (with --num-seeds n: seeds seed .. seed+n-1)"""
     num_seeds: int = 1
