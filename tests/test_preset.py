@@ -214,7 +214,7 @@ def test_defaults_are_the_authors_loop_with_the_action_loss_fixed() -> None:
     preset pins 10M because their measured curve is the start of a 10M run)."""
     fresh, preset = TrainConfig(), presets.apply(TrainConfig(), "authors")
     differ = {
-        f"{s.name}": (_get(fresh, s.name), s.value)
+        s.name: (_get(fresh, s.name), s.value)
         for s in presets.AUTHORS
         if _get(fresh, s.name) != s.value
     }
