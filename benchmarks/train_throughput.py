@@ -2,7 +2,8 @@
 update), the FLOP rate it achieves, and this machine's matmul FLOP rate for comparison.
 
     python benchmarks/train_throughput.py [--envs spread tag ...] [--method nam|transam]
-        [--attention window stream] [--updates 100] [--repeats 5] [--seeds 4]
+        [--attention window stream] [--z-pass shared separate] [--updates 100] [--repeats 5]
+        [--seeds 4]
 
 Each environment runs the default training configuration (``TrainConfig``) for a chunk of
 ``--updates`` updates, compiled ahead of time; the median of ``--repeats`` timed chunks is
@@ -12,7 +13,8 @@ FLOP per output element, data movement as zero; loop bodies are multiplied by th
 The ratio compares the achieved rate to a large float32 matmul timed in the same process.
 
 ``--attention window stream`` (TransAM only) times the window model and the streaming one
-(``model.attention``) side by side and prints the ratio of their env-steps/s.
+(``model.attention``) side by side and prints the ratio of their env-steps/s; ``--z-pass
+shared separate`` does the same for where the policy loss's z comes from (``a2c.z_pass``).
 
 ``--seeds n`` also times n seeds vmapped in one program against the single-seed program (which
 is what running the seeds one after another costs per step).
@@ -181,6 +183,8 @@ class Args:
     """agent-modeling method"""
     attention: tuple[Literal["window", "stream"], ...] = ("window",)
     """TransAM's attention(s) to time (``model.attention``); two: side by side, with the ratio"""
+    z_pass: tuple[Literal["shared", "separate"], ...] = ("shared",)
+    """the policy loss's z pass(es) to time (``a2c.z_pass``); two: side by side, with the ratio"""
     updates: int = 100
     """updates per timed chunk"""
     repeats: int = 5
@@ -189,15 +193,17 @@ class Args:
     """also compare n vmapped seeds with one seed (0: skip)"""
 
 
-def config(env: str, method: str, attention: str) -> TrainConfig:
-    """The default training configuration with the given attention."""
+def config(env: str, method: str, attention: str, z_pass: str = "shared") -> TrainConfig:
+    """The default training configuration with the given attention and z pass."""
     model = replace(TransAMConfig(), attention=attention)
-    return TrainConfig(env=env, method=method, model=model)  # type: ignore[arg-type]
+    a2c = replace(TrainConfig().a2c, z_pass=z_pass)  # type: ignore[arg-type]
+    return TrainConfig(env=env, method=method, model=model, a2c=a2c)  # type: ignore[arg-type]
 
 
 def main(args: Args) -> None:
-    if args.method != "transam" and args.attention != ("window",):
-        raise SystemExit("--attention applies to --method transam")
+    if args.method != "transam" and (args.attention, args.z_pass) != (("window",), ("shared",)):
+        raise SystemExit("--attention and --z-pass apply to --method transam")
+    variants = [f"{a}/{z}" for a in args.attention for z in args.z_pass]
     enable_compilation_cache()
     console = Console()
     peak = matmul_gflops()
@@ -205,18 +211,20 @@ def main(args: Args) -> None:
         title=f"full A2C training, method {args.method}, default config, {args.updates} updates "
         f"x {args.repeats} repeats, {jax.devices()[0].platform}"
     )
-    cols = ("env", "attention", "steps/s", "GFLOP/chunk", "matmul share", "GFLOP/s")
+    cols = ("env", "attention/z pass", "steps/s", "GFLOP/chunk", "matmul share", "GFLOP/s")
     for col in (*cols, "matmul GFLOP/s"):
         table.add_column(col, justify="right")
     table.add_column("ratio", justify="right")
     rates: dict[tuple[str, str], float] = {}
     for name in args.envs:
-        for attention in args.attention:
-            r = time_training(config(name, args.method, attention), args.updates, args.repeats)
-            rates[name, attention] = r.steps_per_s
+        for variant in variants:
+            attention, z_pass = variant.split("/")
+            cfg = config(name, args.method, attention, z_pass)
+            r = time_training(cfg, args.updates, args.repeats)
+            rates[name, variant] = r.steps_per_s
             table.add_row(
                 name,
-                attention if args.method == "transam" else "-",
+                variant if args.method == "transam" else "-",
                 f"{r.steps_per_s:,.0f}",
                 f"{r.gflop_per_chunk:.3g}",
                 f"{r.matmul_share:.0%}",
@@ -225,19 +233,19 @@ def main(args: Args) -> None:
                 f"{r.gflops / peak:.2%}",
             )
     console.print(table)
-    if len(args.attention) > 1:
-        first, *others = args.attention
-        side = Table(title=f"env-steps/s by attention (ratio: against {first})")
+    if len(variants) > 1:
+        first, *others = variants
+        side = Table(title=f"env-steps/s by attention/z pass (ratio: against {first})")
         side.add_column("env", justify="right")
-        for attention in args.attention:
-            side.add_column(f"{attention} steps/s", justify="right")
-        for attention in others:
-            side.add_column(f"{attention} / {first}", justify="right")
+        for variant in variants:
+            side.add_column(f"{variant} steps/s", justify="right")
+        for variant in others:
+            side.add_column(f"{variant} / {first}", justify="right")
         for name in args.envs:
             side.add_row(
                 name,
-                *(f"{rates[name, a]:,.0f}" for a in args.attention),
-                *(f"{rates[name, a] / rates[name, first]:.2f}x" for a in others),
+                *(f"{rates[name, v]:,.0f}" for v in variants),
+                *(f"{rates[name, v] / rates[name, first]:.2f}x" for v in others),
             )
         console.print(side)
     if args.seeds > 1:
@@ -245,7 +253,7 @@ def main(args: Args) -> None:
         for col in ("env", "vmap steps/s", "sequential steps/s", "vmap speed-up"):
             seeds.add_column(col, justify="right")
         for name in args.envs:
-            cfg = config(name, args.method, args.attention[0])
+            cfg = config(name, args.method, args.attention[0], args.z_pass[0])
             one = time_training(cfg, args.updates, args.repeats)
             many = time_training(cfg, args.updates, args.repeats, seeds=args.seeds)
             seeds.add_row(

@@ -45,7 +45,7 @@ ROWS=(
   "terminal_time_limit|--a2c.end-bootstrap zero"
   "anneal_over_run|--a2c.anneal-steps 0"
   "orthogonal_init|--a2c.init orthogonal"
-  "no_act_dropout|--a2c.no-act-dropout"
+  "no_act_dropout|--a2c.no-act-dropout --a2c.z-pass separate"
   "acting_z|--a2c.no-recompute-z"
   "critic_no_z|--a2c.no-critic-z"
   "clock|--a2c.time-feature"

@@ -45,6 +45,7 @@ from transam.models.transam import (
     TransAM,
     TransAMConfig,
     WindowCarry,
+    batch_rollouts,
     bert_init,
     block_sublayers,
     check_local,
@@ -291,11 +292,20 @@ class StreamTransAM:
         key: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         """:meth:`rollout_loss` averaged over a batch of rollouts (time-major [T, N])."""
-        n = xs.first.shape[1]
-        keys = None if key is None else jax.random.split(key, n)
-        fn = jax.vmap(self.rollout_loss, in_axes=(None, 0, 1, 1, 0))
-        total, metrics = fn(params, carry, xs, targets, keys)
-        return total.mean(), {k: v.mean() for k, v in metrics.items()}
+        total, metrics, _ = self.loss_and_embed(params, carry, xs, targets, key)
+        return total, metrics
+
+    def loss_and_embed(
+        self,
+        params: Params,
+        carry: StreamCarry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array], jax.Array]:
+        """:meth:`loss` and the z [T, N, width] of the same pass (as
+        :meth:`TransAM.loss_and_embed`)."""
+        return batch_rollouts(self.rollout_terms, params, carry, xs, targets, key)
 
     def rollout_loss(
         self,
@@ -305,14 +315,29 @@ class StreamTransAM:
         targets: PartnerRecord,
         key: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
+        """Decoder loss over ONE rollout: :meth:`rollout_terms` without its z."""
+        total, metrics, _ = self.rollout_terms(params, carry, xs, targets, key)
+        return total, metrics
+
+    def rollout_terms(
+        self,
+        params: Params,
+        carry: StreamCarry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array], jax.Array]:
         """Decoder loss over ONE rollout: each step's z against its own step's targets (the
-        window model's terms, each step weighing the same). Metrics: ``action_accuracy_newest``
-        (every z is a newest position), ``action_ce`` and ``obs_mse`` where reconstructed."""
-        emb = self.embed_rollout(params, carry, xs, key)[:, None]  # [T, 1, width]
+        window model's terms, each step weighing the same), its metrics, and that z [T, width].
+        Metrics: ``action_accuracy_newest`` (every z is a newest position), ``action_ce`` and
+        ``obs_mse`` where reconstructed."""
+        z = self.embed_rollout(params, carry, xs, key)  # [T, width]
         tgt_other = targets.other_obs.astype(jnp.float32)[:, None]  # [T, 1, N, D]
         tgt_act = targets.other_actions.astype(jnp.int32)[:, None]  # [T, 1, N]
-        per_step, ce, mse, logits = self.window.position_terms(params, emb, tgt_other, tgt_act)
+        per_step, ce, mse, logits = self.window.position_terms(
+            params, z[:, None], tgt_other, tgt_act
+        )
         metrics = position_metrics(logits, tgt_act, jnp.ones(ce.shape, bool), mse)
         metrics = {k: v for k, v in metrics.items() if k not in (ACC_ALL, MSE_ALL)}
         metrics["action_ce"] = jnp.mean(ce)
-        return jnp.mean(per_step), metrics
+        return jnp.mean(per_step), metrics, z

@@ -372,6 +372,26 @@ def authors_action_loss(logits: jax.Array, actions: jax.Array) -> jax.Array:
     return -jnp.sum(onehot * over_agents, axis=(-2, -1)) / logits.shape[-1]
 
 
+def batch_rollouts(
+    rollout_terms: Callable[..., tuple[jax.Array, dict[str, jax.Array], jax.Array]],
+    params: Params,
+    carry: Any,
+    xs: LocalStep,
+    targets: PartnerRecord,
+    key: jax.Array | None,
+    *extra: Any,
+) -> tuple[jax.Array, dict[str, jax.Array], jax.Array]:
+    """A per-rollout ``(loss, metrics, z [T, width])`` over a time-major batch [T, N]: the
+    mean loss, the mean metrics and z [T, N, width]; one dropout key per rollout. ``extra``
+    are further time-major arguments (the window model's ``prior``, ``prior_ok``)."""
+    n = xs.first.shape[1]
+    keys = None if key is None else jax.random.split(key, n)
+    in_axes = (None, 0, 1, 1, 0, *([1] * len(extra)))
+    fn = jax.vmap(rollout_terms, in_axes=in_axes, out_axes=(0, 0, 1))
+    total, metrics, z = fn(params, carry, xs, targets, keys, *extra)
+    return total.mean(), {k: v.mean() for k, v in metrics.items()}, z
+
+
 @partial(jax.jit, static_argnums=0)
 def _init_params(model: TransAM, key: jax.Array) -> Params:
     """Jitted (one program, not hundreds of eager ops) and without the forward pass."""
@@ -610,15 +630,25 @@ class TransAM:
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         """:meth:`rollout_loss` averaged over a batch of rollouts (time-major [T, N]);
         ``prior`` [K-1, N] and ``prior_ok`` [K-1, N] as there."""
-        n = xs.first.shape[1]
-        keys = None if key is None else jax.random.split(key, n)
-        if prior is None:
-            fn = jax.vmap(self.rollout_loss, in_axes=(None, 0, 1, 1, 0))
-            total, metrics = fn(params, carry, xs, targets, keys)
-        else:
-            fn = jax.vmap(self.rollout_loss, in_axes=(None, 0, 1, 1, 0, 1, 1))
-            total, metrics = fn(params, carry, xs, targets, keys, prior, prior_ok)
-        return total.mean(), {k: v.mean() for k, v in metrics.items()}
+        total, metrics, _ = self.loss_and_embed(params, carry, xs, targets, key, prior, prior_ok)
+        return total, metrics
+
+    def loss_and_embed(
+        self,
+        params: Params,
+        carry: WindowCarry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array], jax.Array]:
+        """:meth:`loss` and the z [T, N, width] of the same encoder pass (its dropout mask
+        included): what ``embed_rollout`` gives with that pass's key. The authors' update reads
+        the reconstruction and the policy's (detached) z off one forward pass (the trainer's
+        ``z_pass="shared"``)."""
+        extra = () if prior is None else (prior, prior_ok)
+        return batch_rollouts(self.rollout_terms, params, carry, xs, targets, key, *extra)
 
     def rollout_loss(
         self,
@@ -630,7 +660,22 @@ class TransAM:
         prior: PartnerRecord | None = None,
         prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
-        """Decoder loss over ONE rollout's windows (dropout only when ``key`` is given).
+        """Decoder loss over ONE rollout's windows: :meth:`rollout_terms` without its z."""
+        total, metrics, _ = self.rollout_terms(params, carry, xs, targets, key, prior, prior_ok)
+        return total, metrics
+
+    def rollout_terms(
+        self,
+        params: Params,
+        carry: WindowCarry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array], jax.Array]:
+        """Decoder loss over ONE rollout's windows (dropout only when ``key`` is given), its
+        metrics, and the windows' z [T, width] from the same pass.
 
         With ``recon_at="window"`` and ``prior`` (the targets of the K-1 steps before the
         rollout, oldest first; ``prior_ok`` [K-1] marks those the trainer has), positions
@@ -656,9 +701,10 @@ class TransAM:
         num_steps = xs.obs.shape[0]
         win = self._windows(carry, xs)
         emb = self._encode(params, win, key)  # [T, K, width]
+        z = self._pool(emb, win.valid)  # what embed_rollout gives with this key
         j = jnp.arange(num_steps)[:, None] + jnp.arange(k)[None, :] - (k - 1)
         if self.config.pool == "mean":  # one decoded embedding per window: [T, 1, width]
-            emb, j = self._pool(emb, win.valid)[:, None], jnp.arange(num_steps)[:, None]
+            emb, j = z[:, None], jnp.arange(num_steps)[:, None]
             weight = jnp.ones(j.shape)
         elif self.config.recon_at == "window" and prior is not None:
             assert prior_ok is not None
@@ -684,4 +730,4 @@ class TransAM:
             metrics = {name: v for name, v in metrics.items() if name not in (ACC_ALL, MSE_ALL)}
         metrics["action_ce"] = jnp.mean(ce[:, -1])
         total = jnp.sum(per_position * weight) / jnp.maximum(jnp.sum(weight), 1.0)
-        return total, metrics
+        return total, metrics, z

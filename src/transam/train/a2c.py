@@ -16,8 +16,10 @@ Data flow per step (the execution path sees only :class:`LocalStep` data)::
 Each rollout stores the carries it started from, so the training path (``policy.unroll``,
 ``model.loss`` and, with ``backprop_encoder``, ``model.embed_rollout``) recomputes exactly what
 acting computed, with gradients. With ``recompute_z`` (default) the policy loss reads z
-recomputed by the model's current parameters, as the reference does; without it, the stored
-execution-path z (no second encoder pass).
+recomputed by the model's current parameters, as the reference does: with ``z_pass="shared"``
+(default, the reference's one forward per update) it is the z of the agent-model loss's own
+pass (``model.loss_and_embed``, TransAM family), otherwise a pass of its own; without
+``recompute_z``, the stored execution-path z.
 
 Episodes end by time limit or termination alike (``done``); no bootstrapping across ``done``,
 as in the reference A2C; at a time limit the return bootstraps from the running mean of returns
@@ -31,11 +33,11 @@ The defaults are the reference's scheme (``rollouts_per_collect`` C = 5, see
 normaliser computed rollout by rollout as they come in), then C updates run in order, update c
 on rollout c, each from the policy carry and window that acting had at the start of rollout c;
 the advantage is the normalised return minus the value recomputed in the update, the value
-loss (R - V)^2, z is recomputed by the update (``recompute_z``) with the encoder's dropout on
-(``act_dropout``), and the model reconstructs at ``recon_at="window"``. C = 1, ``advantage="gae"``
-and the other alternatives are each one setting away (docs/methods.md lists them and what
-each was measured to do; ``time_feature`` adds the agent's clock t / episode_len to the policy
-input, which the reference does not have).
+loss (R - V)^2, z is recomputed by the update (``recompute_z``) in the loss's own pass
+(``z_pass``) with the encoder's dropout on (``act_dropout``), and the model reconstructs at
+``recon_at="window"``. C = 1, ``advantage="gae"`` and the other alternatives are each one
+setting away (docs/methods.md lists them and what each was measured to do; ``time_feature``
+adds the agent's clock t / episode_len to the policy input, which the reference does not have).
 """
 
 from __future__ import annotations
@@ -506,6 +508,14 @@ def make_update(
     policy = make_policy(config, env)
     policy_tx, model_tx = make_optimizers(config)
     collect = make_collect(config, env, model)
+    # z_pass="shared": the policy loss's z comes from the agent-model loss's own pass, for the
+    # models that have one (the TransAM family); the others make a pass of their own.
+    shared_pass = (
+        a.recompute_z
+        and not a.backprop_encoder
+        and a.z_pass == "shared"
+        and hasattr(model, "loss_and_embed")
+    )
     prior_k = 0
     if isinstance(model, TransAM) and model.config.recon_at == "window":
         prior_k = model.config.context - 1  # positions before a rollout get their targets
@@ -540,12 +550,18 @@ def make_update(
             )
 
         def loss_fn(policy_params: Any, model_params: Any) -> tuple[jax.Array, Metrics]:
-            if a.backprop_encoder:
-                z = embed(model_params)
-            elif a.recompute_z:  # the model's current parameters, no gradient into it
-                z = jax.lax.stop_gradient(embed(model_params))
+            model_args = (model_params, traj.model_carry0, traj.x, traj.record, key)
+            if shared_pass:  # z off the loss's own pass (the reference's one forward)
+                am, am_metrics, z_loss = model.loss_and_embed(*model_args, **prior)  # type: ignore[attr-defined]
+                z = jax.lax.stop_gradient(z_loss)
             else:
-                z = traj.z
+                am, am_metrics = model.loss(*model_args, **prior)
+                if a.backprop_encoder:
+                    z = embed(model_params)
+                elif a.recompute_z:  # the model's current parameters, no gradient into it
+                    z = jax.lax.stop_gradient(embed(model_params))
+                else:
+                    z = traj.z
             terms = a2c_losses(
                 policy,
                 policy_params,
@@ -561,9 +577,6 @@ def make_update(
                 terms["policy_loss"]
                 + a.vf_coef * terms["value_loss"]
                 - a.ent_coef * terms["entropy"]
-            )
-            am, am_metrics = model.loss(
-                model_params, traj.model_carry0, traj.x, traj.record, key, **prior
             )
             metrics = dict(terms)
             metrics["model_loss"] = am

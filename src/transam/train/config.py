@@ -24,6 +24,7 @@ AdvantageForm = Literal["gae", "recomputed"]
 ValueLossForm = Literal["half_squared", "squared"]
 EndBootstrap = Literal["zero", "return_mean"]
 PolicyInit = Literal["orthogonal", "torch"]
+ZPass = Literal["shared", "separate"]
 
 
 def _methods_with(flag: str) -> list[str]:
@@ -116,6 +117,13 @@ class A2CConfig:
     """the policy loss recomputes z with the agent model's current parameters (with dropout
     under act_dropout) instead of reusing the z acting saw (default: the reference
     recomputes)"""
+    z_pass: ZPass = "shared"
+    """with recompute_z, which encoder pass gives the policy loss its z: the agent-model
+    loss's own forward pass, dropout mask included ('shared', default, the reference: one
+    opponent_model pass feeds the reconstruction and, detached, agent.evaluate; it saves a
+    forward pass per update), or a second pass with a fresh dropout mask ('separate', what
+    runs before 2026-12-02 did). Only the TransAM family has such a pass; the other methods
+    always make their own (the same numbers either way: they have no dropout)"""
 
 
 @dataclass(frozen=True)
@@ -216,6 +224,15 @@ class TrainConfig:
         _choice("a2c.value_loss", a.value_loss, ("half_squared", "squared"))
         _choice("a2c.end_bootstrap", a.end_bootstrap, ("zero", "return_mean"))
         _choice("a2c.init", a.init, ("orthogonal", "torch"))
+        _choice("a2c.z_pass", a.z_pass, ("shared", "separate"))
+        dropout = registry.method_entry(self.method).dropout and self.model.dropout > 0.0
+        shared = a.recompute_z and not a.backprop_encoder and a.z_pass == "shared"
+        if shared and dropout and not a.act_dropout:
+            raise ConfigError(
+                "a2c.z_pass 'shared' gives the policy the z of the agent-model loss's pass, "
+                "which has dropout, but a2c.act_dropout is off (z without dropout); use "
+                "--a2c.z-pass separate with --a2c.no-act-dropout"
+            )
         if a.end_bootstrap == "return_mean" and not a.normalize_returns:
             raise ConfigError(
                 "a2c.end_bootstrap 'return_mean' needs a2c.normalize_returns (the running "
@@ -277,6 +294,7 @@ ADDED_SETTINGS: dict[tuple[str, str], Any] = {
     ("a2c", "init"): "orthogonal",
     ("a2c", "act_dropout"): False,
     ("a2c", "recompute_z"): False,
+    ("a2c", "z_pass"): "separate",
     ("model", "embed_ln"): True,
     ("model", "init"): "default",
     ("model", "action_loss"): "ce",

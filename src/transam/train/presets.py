@@ -107,6 +107,12 @@ AUTHORS: tuple[Setting, ...] = (
         "the update runs opponent_model on the stored windows again and feeds those "
         "embeddings (detached) to agent.evaluate",
     ),
+    Setting(
+        "a2c.z_pass",
+        "shared",
+        "one 'embeddings = opponent_model(...)' per update feeds predict_opponent (the "
+        "reconstruction loss) and, as embeddings[..., -1].detach(), agent.evaluate",
+    ),
     # --- the agent model
     Setting("model.context", 5, "Args.seq_length = 5"),
     Setting("model.width", 128, "hidden_dim=128"),
@@ -171,6 +177,7 @@ BEFORE_PARITY: tuple[Setting, ...] = (
     Setting("a2c.init", "orthogonal", EARLIER),
     Setting("a2c.act_dropout", False, EARLIER),
     Setting("a2c.recompute_z", False, EARLIER),
+    Setting("a2c.z_pass", "separate", EARLIER + "; no effect without recompute_z"),
     Setting("model.embed_ln", True, EARLIER),
     Setting("model.init", "default", EARLIER),
     Setting("model.recon_at", "all", EARLIER),
