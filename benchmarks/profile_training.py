@@ -10,15 +10,20 @@ rollouts with their bootstraps (acting + environment + partners), then C updates
 * ``collect``: the C rollouts and bootstraps (the acting path), split into the agent model's
   ``step`` on the batch of envs, the policy's step, and the environment step (partners
   included), each timed alone over the same number of calls;
-* ``learn``: the C updates, split into the policy's z pass (``embed_rollout``; none when the
-  policy reads the loss pass's z), the agent-model loss forward + backward, the A2C loss
-  forward + backward, and the two Adam steps.
+* ``learn``: the C updates, split into the policy's z pass (``embed_rollout``; only with
+  ``a2c.z_pass="separate"``, else the policy reads the loss pass's z), the agent-model loss
+  forward + backward, the A2C loss forward + backward, and the two Adam steps.
+
+Where the encoder has dropout on (the default), the acting step and the loss are timed again
+without it: the random bits of the dropout masks are integer work that counts no FLOPs.
 
 Each part is scanned ``--reps`` times inside one program (so dispatch is not timed) and the
 median of ``--repeats`` timings is reported per collection. The parts do not add up exactly to
-the whole (XLA fuses across their borders), and the remainder is reported as such. FLOPs come
-from the jaxpr (``train_throughput.count_flops``); "at matmul rate" is each part's matmul
-FLOPs at the rate a float32 matmul of the part's own largest shape reaches in this process.
+the whole (XLA fuses across their borders). FLOPs come from the jaxpr
+(``train_throughput.count_flops``). A second table gives the rate of float32 matmuls of the
+model's own shapes (rows = tokens in one call: envs x tokens per window when acting, rollout
+windows x tokens in the update; width -> 3 x width for q, k, v and width -> feed-forward and
+back), timed as a chain in one program: the ceiling for a part made of such products.
 """
 
 from __future__ import annotations
@@ -94,11 +99,25 @@ def repeat(fn: Callable[[Any], Any], reps: int) -> Callable[[Any], Any]:
     return run
 
 
+def shape_rate(m: int, k: int, n: int, reps: int = 200, repeats: int = 5) -> float:
+    """GFLOP/s of the float32 products [m, k] @ [k, n] @ [n, k], chained ``reps`` times."""
+    a = jax.random.normal(jax.random.key(0), (m, k), jnp.float32)
+    b = jax.random.normal(jax.random.key(1), (k, n), jnp.float32) / n
+    c = jax.random.normal(jax.random.key(2), (n, k), jnp.float32) / k
+
+    def chain(x: jax.Array) -> jax.Array:
+        return jax.lax.scan(lambda h, _: (h + 1e-3 * ((h @ b) @ c), None), x, None, length=reps)[0]
+
+    sec, _ = timed(chain, a, repeats=repeats)
+    return 4 * m * k * n * reps / sec / 1e9
+
+
 def main(args: Args) -> None:
     enable_compilation_cache()
     model_cfg = dataclasses.replace(TransAMConfig(), attention=args.attention)
-    config = TrainConfig(env=args.env, method=args.method, model=model_cfg)  # type: ignore[arg-type]
-    env, model = env_and_model(config)
+    config = TrainConfig(env=args.env, method=args.method, model=model_cfg)
+    env, model_ = env_and_model(config)
+    model: Any = model_  # the TransAM family's methods take dropout keys
     a = config.a2c
     per = a.rollouts_per_collect
     n = args.reps
@@ -131,11 +150,13 @@ def main(args: Args) -> None:
     drop = config.acting_dropout
     calls = per * (a.n_steps + 1)
 
-    def model_step(inp: tuple[Any, Any]) -> Any:
-        key = jax.random.key(2) if drop else None
+    def model_step(inp: tuple[Any, Any], dropout: bool = drop) -> Any:
+        key = jax.random.key(2) if dropout else None
         return a2c.model_step(model, rs.model_params, inp[0], inp[1], None, key)[1]
 
     add("  agent model step (acting)", model_step, (carry, x), calls)
+    if drop:
+        add("    the same without dropout", lambda inp: model_step(inp, False), (carry, x), calls)
     z0 = jnp.zeros((a.num_envs, model.embed_dim))
     add(
         "  policy step (acting)",
@@ -154,26 +175,27 @@ def main(args: Args) -> None:
     col = jax.tree.map(lambda v: v[0], collected)
     traj = col.traj
     key = jax.random.key(4)
-
-    learn_sec = total - rows[1][1]
-    rows.append(("learn: C updates (collection - collect)", learn_sec, rows[0][2] - rows[1][2]))
-
+    rows.append(("learn: C updates (collection - collect)", total - rows[1][1], 0.0))
+    learn_row = len(rows) - 1
     zkeys = jax.random.split(key, a.num_envs)
 
     def embed(p: Any) -> jax.Array:
-        if drop and model.name.startswith("transam"):
-            f = jax.vmap(model.embed_rollout, in_axes=(None, 0, 1, 0), out_axes=1)  # type: ignore[call-arg]
+        if drop:
+            f = jax.vmap(model.embed_rollout, in_axes=(None, 0, 1, 0), out_axes=1)
             return f(p, traj.model_carry0, traj.x, zkeys)
         return jax.vmap(model.embed_rollout, in_axes=(None, 0, 1), out_axes=1)(
             p, traj.model_carry0, traj.x
         )
 
-    add("  policy's z pass (forward)", embed, rs.model_params, per)
+    if a.z_pass == "separate" or not hasattr(model, "loss_and_embed"):
+        add("  policy's z pass (forward)", embed, rs.model_params, per)
 
-    def model_grad(p: Any) -> Any:
-        return jax.grad(lambda q: model.loss(q, traj.model_carry0, traj.x, traj.record, key)[0])(p)
+    def model_grad(p: Any, k: jax.Array | None = key) -> Any:
+        return jax.grad(lambda q: model.loss(q, traj.model_carry0, traj.x, traj.record, k)[0])(p)
 
     add("  agent-model loss forward + backward", model_grad, rs.model_params, per)
+    if drop:
+        add("    the same without dropout", lambda p: model_grad(p, None), rs.model_params, per)
 
     def policy_grad(p: Any) -> Any:
         def f(q: Any) -> jax.Array:
@@ -194,6 +216,8 @@ def main(args: Args) -> None:
 
     add("  two Adam steps", adam, (g_policy, g_model), per)
 
+    name, sec, _ = rows[learn_row]
+    rows[learn_row] = (name, sec, rows[0][2] - rows[1][2])
     peak = matmul_gflops()
     console = Console()
     table = Table(
@@ -211,6 +235,23 @@ def main(args: Args) -> None:
             f"{flops / sec / 1e9:.1f}",
         )
     console.print(table)
+    shapes = Table(title="float32 matmul chains of the model's shapes (rows x width x inner)")
+    for colname in ("where", "shape", "GFLOP/s", "of the 2048^2 rate"):
+        shapes.add_column(colname, justify="right" if colname != "where" else "left")
+    w, ff = config.model.width, config.model.ff_width
+    per_window = 3 * config.model.context
+    tokens = {
+        "acting (one step, all envs)": a.num_envs
+        * (per_window if args.attention == "window" else 3),
+        "update (one rollout's windows)": a.num_envs * a.n_steps * per_window,
+    }
+    if args.attention == "stream":
+        tokens["update (one rollout's windows)"] = a.num_envs * a.n_steps * 3
+    for where, m in tokens.items():
+        for inner in (3 * w, ff):
+            rate = shape_rate(m, w, inner)
+            shapes.add_row(where, f"{m} x {w} x {inner}", f"{rate:.0f}", f"{rate / peak:.0%}")
+    console.print(shapes)
     console.print(
         f"whole collection: {steps / total:,.0f} env-steps/s, "
         f"{rows[0][2] / total / 1e9:.1f} GFLOP/s = {rows[0][2] / total / 1e9 / peak:.0%} of the "

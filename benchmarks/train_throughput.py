@@ -195,7 +195,7 @@ class Args:
 
 def config(env: str, method: str, attention: str, z_pass: str = "shared") -> TrainConfig:
     """The default training configuration with the given attention and z pass."""
-    model = replace(TransAMConfig(), attention=attention)
+    model = replace(TransAMConfig(), attention=attention)  # type: ignore[arg-type]
     a2c = replace(TrainConfig().a2c, z_pass=z_pass)  # type: ignore[arg-type]
     return TrainConfig(env=env, method=method, model=model, a2c=a2c)  # type: ignore[arg-type]
 
