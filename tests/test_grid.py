@@ -66,7 +66,7 @@ def test_grid_file_keeps_one_budget_and_never_adopts_a_foreign_directory(tmp_pat
     assert saved["invocations"][-1]["wall_s"] >= 0
     with pytest.raises(ConfigError, match=r"holds a 'smoke' grid"):
         grid.open_grid(out, "small", specs, [])
-    with pytest.raises(ConfigError, match=r"unknown budget 'huge'.*smoke, small, paper"):
+    with pytest.raises(ConfigError, match=r"unknown budget 'huge'.*smoke, small, medium, paper"):
         grid.open_grid(tmp_path / "h", "huge", specs, [])
     other = tmp_path / "other"
     other.mkdir()

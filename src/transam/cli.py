@@ -299,7 +299,7 @@ class Reproduce:
     runs and resuming interrupted ones, evaluate every run on its training and held-out partners,
     then build the report (figures, report.md, results.json) in --out/report/."""
 
-    budget: Literal["smoke", "small", "paper"] = "small"
+    budget: Literal["smoke", "small", "medium", "paper"] = "small"
     """smoke: minutes (a test); small: a few hours on 2 CPU cores; paper: 10M steps x 5 seeds"""
     out: str = "runs/reproduce"
     """grid directory (one budget per directory)"""

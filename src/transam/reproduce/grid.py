@@ -30,7 +30,7 @@ from typing import Any, Literal
 from transam import registry
 from transam.train.config import ConfigError, EvalConfig, TrainConfig
 
-BudgetName = Literal["smoke", "small", "paper"]
+BudgetName = Literal["smoke", "small", "medium", "paper"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +55,12 @@ BUDGETS: dict[str, Budget] = {
     "smoke": Budget(total_steps=1_000, seeds=2, evals=2, eval_episodes=8, final_episodes=26),
     # What fits about an hour on a 2-core CPU for all 4 envs x 10 methods (docs/results/).
     "small": Budget(total_steps=30_000, seeds=2, evals=6, eval_episodes=16, final_episodes=100),
+    # One environment x 10 methods x 3 seeds in about a working day on a 2-core CPU
+    # (--envs spread): the 15 transformer runs dominate at about 1,000 env-steps/s each
+    # (docs/performance.md), 4-5 h; the 15 recurrent ones add well under an hour.
+    "medium": Budget(
+        total_steps=1_000_000, seeds=3, evals=40, eval_episodes=100, final_episodes=500
+    ),
     # The paper: 10M steps, 5 seeds.
     "paper": Budget(
         total_steps=10_000_000, seeds=5, evals=100, eval_episodes=100, final_episodes=100
