@@ -9,7 +9,8 @@ the mean over seeds with a 95% confidence interval over the per-seed-and-evaluat
 (Student t; the evaluations of one seed are correlated, so this interval is, if anything,
 narrow). With ``--eval``, each seed's final evaluation (``transam evaluate``'s JSON) adds the
 return and newest-position accuracy over all its episodes pooled across seeds, and the
-per-timestep accuracy at a few steps of the episode.
+all-window-positions accuracy (the window model only: a causal stream has one decoded position
+per step) and the per-timestep accuracy at a few steps of the episode.
 """
 
 from __future__ import annotations
@@ -75,9 +76,9 @@ def main() -> None:
     print()
     print(
         "| run | final evaluation: episodes | return | accuracy (newest) "
-        "| accuracy at steps 1, 6, 12, 24 |"
+        "| accuracy (all window positions) | newest-position accuracy at steps 1, 6, 12, 24 |"
     )
-    print("|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|")
     for label, evals in finals.items():
         episodes = sum(e["episodes"] for e in evals)
         ret = np.mean([e["return"]["mean"] for e in evals])
@@ -85,9 +86,14 @@ def main() -> None:
         var = np.mean([e["return"]["std"] ** 2 for e in evals])
         se = math.sqrt(var / episodes)
         acc = np.mean([e["action_accuracy_newest"] for e in evals])
+        every = [e.get("action_accuracy_all_positions") for e in evals]
+        all_pos = "—" if None in every else f"{np.mean(every):.3f}"
         curve = np.mean([e["per_step"]["action_accuracy_newest"] for e in evals], axis=0)
         steps = ", ".join(f"{curve[t]:.2f}" for t in (1, 6, 12, 24))
-        print(f"| {label} | {episodes} | {ret:.2f} ± {1.96 * se:.2f} | {acc:.3f} | {steps} |")
+        print(
+            f"| {label} | {episodes} | {ret:.2f} ± {1.96 * se:.2f} | {acc:.3f} | {all_pos} "
+            f"| {steps} |"
+        )
 
 
 if __name__ == "__main__":
