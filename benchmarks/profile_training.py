@@ -29,8 +29,6 @@ back), timed as a chain in one program: the ceiling for a part made of such prod
 from __future__ import annotations
 
 import dataclasses
-import statistics
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -40,7 +38,7 @@ import jax.numpy as jnp
 import tyro
 from rich.console import Console
 from rich.table import Table
-from train_throughput import count_flops, matmul_gflops
+from train_throughput import count_flops, matmul_gflops, median_seconds
 
 from transam.jaxcache import enable_compilation_cache
 from transam.models import TransAMConfig
@@ -64,16 +62,10 @@ class Args:
 
 def timed(fn: Callable[..., Any], *args: Any, repeats: int) -> tuple[float, float]:
     """(median seconds of one call of the compiled ``fn(*args)``, its FLOPs)."""
-    jitted = jax.jit(fn)
-    compiled = jitted.lower(*args).compile()
+    compiled = jax.jit(fn).lower(*args).compile()
     flops, _ = count_flops(jax.make_jaxpr(fn)(*args))
-    jax.block_until_ready(compiled(*args))
-    times = []
-    for _ in range(repeats):
-        tic = time.perf_counter()
-        jax.block_until_ready(compiled(*args))
-        times.append(time.perf_counter() - tic)
-    return statistics.median(times), flops
+    jax.block_until_ready(compiled(*args))  # warm-up
+    return median_seconds(lambda: compiled(*args), repeats), flops
 
 
 def repeat(fn: Callable[[Any], Any], reps: int) -> Callable[[Any], Any]:

@@ -510,12 +510,7 @@ def make_update(
     collect = make_collect(config, env, model)
     # z_pass="shared": the policy loss's z comes from the agent-model loss's own pass, for the
     # models that have one (the TransAM family); the others make a pass of their own.
-    shared_pass = (
-        a.recompute_z
-        and not a.backprop_encoder
-        and a.z_pass == "shared"
-        and hasattr(model, "loss_and_embed")
-    )
+    shared_pass = config.z_from_loss_pass and hasattr(model, "loss_and_embed")
     prior_k = 0
     if isinstance(model, TransAM) and model.config.recon_at == "window":
         prior_k = model.config.context - 1  # positions before a rollout get their targets

@@ -191,6 +191,14 @@ class TrainConfig:
         return self.a2c.act_dropout and registry.method_entry(self.method).dropout
 
     @property
+    def z_from_loss_pass(self) -> bool:
+        """Whether the policy loss's z is to come from the agent-model loss's own pass
+        (``z_pass="shared"`` with ``recompute_z`` and without ``backprop_encoder``); the trainer
+        does so for the models that have such a pass (``loss_and_embed``)."""
+        a = self.a2c
+        return a.recompute_z and not a.backprop_encoder and a.z_pass == "shared"
+
+    @property
     def run_dir(self) -> str:
         return self.out or f"runs/{self.env}-{self.method}-s{self.seed}"
 
@@ -226,8 +234,7 @@ class TrainConfig:
         _choice("a2c.init", a.init, ("orthogonal", "torch"))
         _choice("a2c.z_pass", a.z_pass, ("shared", "separate"))
         dropout = registry.method_entry(self.method).dropout and self.model.dropout > 0.0
-        shared = a.recompute_z and not a.backprop_encoder and a.z_pass == "shared"
-        if shared and dropout and not a.act_dropout:
+        if self.z_from_loss_pass and dropout and not a.act_dropout:
             raise ConfigError(
                 "a2c.z_pass 'shared' gives the policy the z of the agent-model loss's pass, "
                 "which has dropout, but a2c.act_dropout is off (z without dropout); use "
