@@ -147,6 +147,37 @@ def test_truncated_newest_checkpoint_resume_uses_the_previous_one(
     assert_same_as(reference, out)  # resumed from chunk 1: the same numbers
 
 
+def test_resume_with_more_steps_continues_a_finished_run_as_if_set_longer_from_the_start(
+    reference: tuple[list[dict[str, Any]], Any], tmp_path: Path
+) -> None:
+    out = tmp_path / "run"
+    short = dataclasses.replace(tiny(out), total_steps=2 * CHUNK_STEPS)
+    assert train(short).finished and len(read_metrics(out / "metrics.jsonl")) == 2
+    with pytest.raises(rundir.RunDirError, match="continued to more steps, not fewer"):
+        train(dataclasses.replace(short, total_steps=CHUNK_STEPS, resume=True))
+    assert train(tiny(out, resume=True)).finished
+    assert_same_as(reference, out)  # the five chunks of a run set for five from the start
+    assert json.loads((out / "config.json").read_text())["total_steps"] == CHUNKS * CHUNK_STEPS
+
+
+def test_resume_with_more_steps_is_refused_where_the_steps_done_would_differ(
+    tmp_path: Path,
+) -> None:
+    by_run = tmp_path / "by_run"  # annealed over its own length: every step depends on it
+    cfg = dataclasses.replace(tiny(by_run), total_steps=CHUNK_STEPS)
+    cfg = dataclasses.replace(cfg, a2c=dataclasses.replace(cfg.a2c, anneal_lr=True))
+    assert train(cfg).finished
+    with pytest.raises(rundir.RunDirError, match="anneals its learning rate over its own 2000"):
+        train(dataclasses.replace(cfg, total_steps=2 * CHUNK_STEPS, resume=True))
+    cut = tmp_path / "cut"  # ends with a short chunk
+    cfg = dataclasses.replace(tiny(cut), total_steps=CHUNK_STEPS + 80)
+    assert train(cfg).finished
+    before = (cut / "config.json").read_bytes(), (cut / "final.json").read_bytes()
+    with pytest.raises(rundir.RunDirError, match="ends with a short chunk"):
+        train(dataclasses.replace(cfg, total_steps=2 * CHUNK_STEPS, resume=True))
+    assert ((cut / "config.json").read_bytes(), (cut / "final.json").read_bytes()) == before
+
+
 # ------------------------------------------------------------------ non-finite training
 
 

@@ -39,7 +39,10 @@ Integrity:
   (some NFS mounts), the holder's pid is checked instead: a live process on this host blocks,
   a dead one does not.
 * **The same run** (:func:`prepare_run_dir`): ``--resume`` refuses changed settings
-  (config.json) and a changed partner population (partners.json's digest).
+  (config.json) and a changed partner population (partners.json's digest). The one setting
+  it may change is a larger ``total_steps``, where the learning-rate schedule does not depend
+  on the run length: the run is continued ('extend'), finished or not, exactly as a run set
+  for the larger length from the start would have gone on.
 
 Stopping on SIGINT/SIGTERM is the training loop's (:mod:`transam.train.stop`).
 """
@@ -273,6 +276,9 @@ def prepare_run_dir(config: TrainConfig) -> str:
         )
     saved = with_added_settings(json.loads((out / "config.json").read_text()))
     wanted = json.loads(json.dumps(config.identity()))
+    if saved != wanted and _extends(out, saved, wanted, config):
+        _check_population(out, config)
+        return "extend"
     if saved != wanted:
         diff = sorted(_diff(saved, wanted))
         raise RunDirError(
@@ -282,6 +288,28 @@ def prepare_run_dir(config: TrainConfig) -> str:
     if not finished:
         _check_population(out, config)
     return "finished" if finished else "resume"
+
+
+def _extends(out: Path, saved: dict[str, Any], wanted: dict[str, Any], config: TrainConfig) -> bool:
+    """Whether ``--resume`` asks to continue the run to a larger ``total_steps`` and nothing
+    else; raises where it asks for that but cannot have it (a shorter run, or a learning-rate
+    schedule that depends on the run length, so the steps done so far would differ)."""
+    if {**saved, "total_steps": wanted["total_steps"]} != wanted:
+        return False
+    before, now = saved["total_steps"], wanted["total_steps"]
+    if now < before:
+        raise RunDirError(
+            f"--resume --total-steps {now}: the run in {str(out)!r} was set for {before} steps; "
+            "a run can be continued to more steps, not fewer"
+        )
+    if config.schedule_by_run:
+        raise RunDirError(
+            f"--resume --total-steps {now}: the run in {str(out)!r} anneals its learning rate "
+            f"over its own {before} steps, so a longer run would have trained differently from "
+            "the start; continue only runs started with --a2c.anneal-steps N (or "
+            "--a2c.no-anneal-lr), or start over with --force"
+        )
+    return True
 
 
 def _diff(a: Any, b: Any, prefix: str = "") -> Iterator[str]:
@@ -308,6 +336,15 @@ def start_run_dir(config: TrainConfig) -> None:
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "config.json", config.identity())
     write_json(out / POPULATION_FILE, population_record(config))
+
+
+def extend_run_dir(config: TrainConfig) -> None:
+    """Set a run for the larger ``config.total_steps`` (see :func:`prepare_run_dir`). The old
+    final.json goes first: interrupted in between, the run is an unfinished run of its old
+    length, which a resume finishes and a second extension continues."""
+    out = Path(config.run_dir)
+    (out / "final.json").unlink(missing_ok=True)
+    write_json(out / "config.json", config.identity())
 
 
 def clean_run_dir(out: Path) -> None:

@@ -199,6 +199,13 @@ class TrainConfig:
         return a.recompute_z and not a.backprop_encoder and a.z_pass == "shared"
 
     @property
+    def schedule_by_run(self) -> bool:
+        """Whether the learning-rate schedule depends on the run length (annealed over
+        ``total_steps``). When it does not, a longer run is a shorter one continued, so
+        ``--resume`` may raise ``total_steps``."""
+        return self.a2c.anneal_lr and not self.a2c.anneal_steps
+
+    @property
     def run_dir(self) -> str:
         return self.out or f"runs/{self.env}-{self.method}-s{self.seed}"
 

@@ -35,8 +35,10 @@ import numpy as np
 from transam.compose import resolve_partners
 from transam.models.base import ACC_NEWEST
 from transam.rundir import (
+    RunDirError,
     checkpoints,
     clean_run_dir,
+    extend_run_dir,
     newest_good_checkpoint,
     prepare_run_dir,
     prune_checkpoints,
@@ -99,13 +101,16 @@ def _train_locked(
     dirs = seed_dirs(config)
     if out.exists() and config.force:
         clean_run_dir(out)
+    env, _ = env_and_model(config)
+    plan = make_plan(config, env.spec.episode_len)
+    if action == "extend":
+        _check_extension(config, env.spec.episode_len)
+        extend_run_dir(config)
     if action == "fresh" or not (out / "config.json").exists():
         start_run_dir(config)
     for d in dirs:
         d.mkdir(parents=True, exist_ok=True)
 
-    env, _ = env_and_model(config)
-    plan = make_plan(config, env.spec.episode_len)
     groups = [list(range(len(seeds)))]
     if config.seed_mode == "sequential" and len(seeds) > 1:
         groups = [[i] for i in range(len(seeds))]
@@ -131,6 +136,22 @@ def _train_locked(
     if done:
         write_final(out, finals)
     return RunResult(out, seeds, finals, finished=done)
+
+
+def _check_extension(config: TrainConfig, episode_len: int) -> None:
+    """Refuse to continue a run whose last chunk its old length cut short: the longer run's
+    chunks (its evaluation points) would not line up with those already done."""
+    out = Path(config.run_dir)
+    before = json.loads((out / "config.json").read_text())["total_steps"]
+    old = make_plan(dataclasses.replace(config, total_steps=before), episode_len)
+    if old.total_updates % old.updates_per_chunk:
+        chunk = old.updates_per_chunk * old.steps_per_update
+        raise RunDirError(
+            f"--resume --total-steps {config.total_steps}: the run in {str(out)!r} ends with a "
+            f"short chunk ({before} steps is not a multiple of its {chunk}-step evaluation "
+            "interval), so a continued run would not be the run set for the larger length "
+            "from the start; start over with --force"
+        )
 
 
 def _run_group(

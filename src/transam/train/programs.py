@@ -65,17 +65,12 @@ def env_and_model(config: TrainConfig) -> tuple[ControlledEnv, AgentModel]:
     return e, make_model(config.method, e.spec, config.model, config.baseline)
 
 
-def anneal_by_run(config: TrainConfig) -> bool:
-    """Whether the learning-rate schedule depends on the run length."""
-    return config.a2c.anneal_lr and not config.a2c.anneal_steps
-
-
 def program_key(config: TrainConfig) -> TrainConfig:
     """The part of the config a compiled program depends on (not the seed or the paths; the
     run length only through the learning-rate schedule)."""
     return dataclasses.replace(
         config,
-        total_steps=config.total_steps if anneal_by_run(config) else 1,
+        total_steps=config.total_steps if config.schedule_by_run else 1,
         seed=0,
         num_seeds=1,
         seed_mode="vmap",
