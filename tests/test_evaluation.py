@@ -16,10 +16,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from transam.cli import Evaluate
+from transam.cli import Evaluate, Export
 from transam.compose import make_env
 from transam.evaluation.final import balanced_partners, evaluate_run, population_for
 from transam.evaluation.probe import linear_probe, pca_2d, stratified_split
+from transam.evaluation.weights import export_run
 from transam.partners import learned
 from transam.reproduce import grid
 from transam.rundir import evaluation_path, load_run_config, read_metrics, write_json
@@ -254,3 +255,53 @@ def test_nam_has_no_decoder_metrics_and_no_probe(smoke_grid: Path, tmp_path: Pat
     assert any("no learned embedding" in note for note in res["notes"])
     assert not (run / "eval_train_pca.npz").exists()
     assert (run / "eval_train.png").exists()
+
+
+# ------------------------------------------------------------------ pretrained runs
+
+
+def test_a_pretrained_export_evaluates_exactly_as_its_checkpoint(
+    run_dir: Path, result: dict[str, Any], tmp_path: Path
+) -> None:
+    pre = tmp_path / "pre"
+    card = export_run(run_dir, pre)
+    assert (card["step"], card["checkpoint"]) == (1000, "checkpoints/chunk_000001.msgpack")
+    assert sorted(p.name for p in pre.iterdir()) == [
+        "card.json",
+        "config.json",
+        "params.safetensors",
+        "partners.json",
+    ]
+    newest = run_dir / "checkpoints" / "chunk_000001.msgpack"
+    assert (pre / "params.safetensors").stat().st_size < newest.stat().st_size / 2
+    res = evaluate_run(pre, episodes=EPISODES, out=tmp_path / "ev")
+    assert not (pre / "eval_train.json").exists()  # outputs in --out only
+    assert (tmp_path / "ev" / "eval_train.png").exists()
+    same = {k: v for k, v in result.items() if k not in ("checkpoint", "notes")}
+    assert {k: v for k, v in res.items() if k not in ("checkpoint", "notes")} == same
+    assert res["checkpoint"] == "params.safetensors" and res["notes"] == result["notes"]
+    with pytest.raises(ConfigError, match="pretrained run: it has no --checkpoint"):
+        evaluate_run(pre, episodes=EPISODES, checkpoint="0", out=tmp_path / "ev")
+    with pytest.raises(ConfigError, match="exists and is not a pretrained run"):
+        Export(str(run_dir), str(tmp_path / "ev")).run()  # would replace other files
+
+
+def test_a_pretrained_run_whose_settings_do_not_fit_its_weights_is_refused(
+    run_dir: Path, tmp_path: Path
+) -> None:
+    pre = tmp_path / "pre"
+    Export(str(run_dir), str(pre)).run()
+    saved = json.loads((pre / "config.json").read_text())
+    saved["baseline"]["hidden"] *= 2
+    write_json(pre / "config.json", saved)
+    with pytest.raises(
+        ConfigError,
+        match=r"params.safetensors: the model parameters do not fit|"
+        r"params.safetensors: model/.* has shape",
+    ):
+        evaluate_run(pre, episodes=EPISODES, out=tmp_path / "ev")
+
+
+def test_unknown_pretrained_name_lists_the_shipped_ones(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"no run directory 'spread-nope'.*shipped pretrained"):
+        evaluate_run("spread-nope", episodes=EPISODES, out=tmp_path / "ev")

@@ -378,7 +378,8 @@ class Evaluate:
     linear probe and projection of the embeddings (writes eval_PARTNERS.json/.png)."""
 
     run_dir: Annotated[str, tyro.conf.Positional]
-    """run directory (one seed: a multi-seed run's seed_S subdirectory)"""
+    """run directory (one seed: a multi-seed run's seed_S subdirectory), a pretrained run's
+    directory, or the name of a shipped pretrained run (`transam pretrained` lists them)"""
     episodes: int = 100
     """evaluation episodes (run in parallel; partner i mod M for episode i)"""
     partners: EvalPartners = "train"
@@ -388,14 +389,20 @@ class Evaluate:
     """checkpoint file name or chunk number (default: the newest)"""
     seed: int = 0
     """PRNG seed of the episodes and of the probe's train/test split"""
+    out: str | None = None
+    """where to write the outputs (default: the run directory; runs/pretrained/NAME for a
+    shipped pretrained run)"""
 
     def run(self) -> None:
-        from transam.evaluation.final import EVAL_METRICS, evaluate_run
+        from transam.evaluation.final import EVAL_METRICS, evaluate_run, output_dir
         from transam.jaxcache import enable_compilation_cache
         from transam.rundir import evaluation_path, projection_path
 
         enable_compilation_cache()
-        res = evaluate_run(self.run_dir, self.episodes, self.partners, self.checkpoint, self.seed)
+        dest = output_dir(self.run_dir, self.out)
+        res = evaluate_run(
+            self.run_dir, self.episodes, self.partners, self.checkpoint, self.seed, self.out
+        )
         table = Table(
             title=f"{res['env']}/{res['method']} seed {res['seed']}, {res['checkpoint']} "
             f"(step {res['step']:,}), {res['episodes']} episodes, {res['population_name']}"
@@ -413,10 +420,50 @@ class Evaluate:
         console.print(table)
         for note in res["notes"]:
             console.print(f"note: {note}")
-        path = evaluation_path(self.run_dir, self.partners)
+        path = evaluation_path(dest, self.partners)
         console.print(f"wrote {path}, {path.with_suffix('.png')}")
         if "pca" in res:
-            console.print(f"wrote {projection_path(self.run_dir, self.partners)}")
+            console.print(f"wrote {projection_path(dest, self.partners)}")
+
+
+@dataclass
+class Export:
+    """Write a pretrained run (the policy's and the agent model's parameters, the settings and
+    the partner population's digest; a few MB) from one seed of a trained run, so that
+    `transam evaluate DIR` plays it without the run directory."""
+
+    run_dir: Annotated[str, tyro.conf.Positional]
+    """run directory (one seed: a multi-seed run's seed_S subdirectory)"""
+    out: str
+    """the pretrained run's directory (replaced if it already holds one)"""
+    checkpoint: str | None = None
+    """checkpoint file name or chunk number (default: the newest that verifies)"""
+
+    def run(self) -> None:
+        from transam.evaluation.weights import export_run
+
+        card = export_run(self.run_dir, self.out, self.checkpoint)
+        console.print(
+            f"wrote {self.out}: {card['env']}/{card['method']} seed {card['seed']}, "
+            f"{card['checkpoint']} (step {card['step']:,})"
+        )
+
+
+@dataclass
+class Pretrained:
+    """List the shipped pretrained runs (`transam evaluate NAME` plays one)."""
+
+    def run(self) -> None:
+        from transam.evaluation.weights import PRETRAINED_DIR, pretrained_names, read_card
+
+        table = Table(title=f"pretrained runs in {PRETRAINED_DIR}")
+        for col in ("name", "env", "method", "seed", "step", "summary"):
+            table.add_column(col)
+        for name in pretrained_names():
+            card = read_card(PRETRAINED_DIR / name)
+            row = [card.get(k, "") for k in ("env", "method", "seed", "step")]
+            table.add_row(name, *map(str, row), str(card.get("summary", "")))
+        console.print(table)
 
 
 @dataclass
@@ -826,6 +873,8 @@ def command(preset: str = "none") -> Any:
         | Annotated[Envs, tyro.conf.subcommand("envs")]
         | Annotated[Train, tyro.conf.subcommand("train", default=_with_preset(Train, preset))]
         | Annotated[Evaluate, tyro.conf.subcommand("evaluate")]
+        | Annotated[Export, tyro.conf.subcommand("export")]
+        | Annotated[Pretrained, tyro.conf.subcommand("pretrained")]
         | Annotated[Reproduce, tyro.conf.subcommand("reproduce")]
         | Annotated[Report, tyro.conf.subcommand("report")]
         | Annotated[Partners, tyro.conf.subcommand("partners")]

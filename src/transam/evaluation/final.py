@@ -59,20 +59,15 @@ import numpy as np
 from transam import registry
 from transam.evaluation.figure import evaluation_figure
 from transam.evaluation.probe import linear_probe, pca_2d
+from transam.evaluation.weights import PRETRAINED_DIR, is_pretrained, resolve_run, restore_weights
 from transam.models.base import ACC_ALL, ACC_NEWEST, MSE_ALL
 from transam.rundir import (
     EVAL_PARTNERS,
-    CheckpointError,
-    checkpoints,
     evaluation_path,
-    find_checkpoint,
     load_run_config,
-    newest_good_checkpoint,
     projection_path,
-    read_checkpoint,
     recorded_population,
     run_lock,
-    warn,
     write_atomic,
     write_json,
 )
@@ -123,39 +118,20 @@ def _program(config: TrainConfig, n: int) -> Callable[..., Any]:
     return jax.jit(make_episodes(config, env, model, n, positions=True))
 
 
-def _restore(
-    config: TrainConfig, run_dir: Path, checkpoint: str | int | None, notes: list[str]
-) -> tuple[Path, Any]:
-    """(path, RunnerState) of the named checkpoint, or of the newest one that verifies (each
-    newer one that does not is reported and noted). The template is only shapes: nothing is
-    compiled."""
-    from transam.train.a2c import init_runner
-    from transam.train.programs import env_and_model
-
-    env, model = env_and_model(config)
-    template = jax.eval_shape(lambda k: init_runner(config, env, model, k), jax.random.key(0))
-    path = find_checkpoint(run_dir, checkpoint)
-    if checkpoint is not None:
-        try:
-            return path, read_checkpoint(path, template)
-        except CheckpointError as err:
-            raise ConfigError(f"{err}; choose another with --checkpoint") from None
-
-    def report(message: str) -> None:
-        warn(message)
-        notes.append(message)
-
-    found = newest_good_checkpoint([run_dir], template, report=report)
-    if found is None:
-        names = ", ".join(p.name for _, p in sorted(checkpoints(run_dir).items()))
-        raise ConfigError(f"no checkpoint of {str(run_dir)!r} verifies (have: {names})")
-    chunk, (state,) = found
-    return checkpoints(run_dir)[chunk], state
-
-
 def _per_step_mean(values: np.ndarray, live: np.ndarray) -> list[float | None]:
     count = live.sum(1)
     return [float(v / c) if c > 0 else None for v, c in zip(values.sum(1), count, strict=True)]
+
+
+def output_dir(run_dir: str | Path, out: str | Path | None = None) -> Path:
+    """Where ``transam evaluate`` writes: ``out``, else the run directory, except for a shipped
+    pretrained run (inside the package), whose outputs go to runs/pretrained/NAME."""
+    if out is not None:
+        return Path(out)
+    run_dir = resolve_run(run_dir)
+    if is_pretrained(run_dir) and run_dir.parent == PRETRAINED_DIR:
+        return Path("runs/pretrained") / run_dir.name
+    return run_dir
 
 
 def evaluate_run(
@@ -164,26 +140,32 @@ def evaluate_run(
     partners: str = "train",
     checkpoint: str | int | None = None,
     seed: int = 0,
+    out: str | Path | None = None,
 ) -> dict[str, Any]:
-    """Evaluate a run's checkpoint on ``episodes`` episodes with its training partners or
-    held-out ones; write eval_{partners}.json/.png/_pca.npz and return the JSON's contents.
-    Holds the run's lock meanwhile; without ``checkpoint``, uses the newest checkpoint that
-    verifies and notes each newer one that does not."""
+    """Evaluate a run's checkpoint (or a pretrained run: a directory, or the name of a shipped
+    one) on ``episodes`` episodes with its training partners or held-out ones; write
+    eval_{partners}.json/.png/_pca.npz into :func:`output_dir` and return the JSON's contents.
+    Holds that directory's lock meanwhile; without ``checkpoint``, uses the newest checkpoint
+    that verifies and notes each newer one that does not."""
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 2:
         raise ConfigError(f"episodes must be an integer >= 2, got {episodes!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
-    run_dir = Path(run_dir)
+    dest = output_dir(run_dir, out)
+    run_dir = resolve_run(run_dir)
     config = load_run_config(run_dir)
     population_for(config.partners, partners)  # checks ``partners``
     top = run_dir if (run_dir / "config.json").exists() else run_dir.parent
-    with run_lock(top, "transam evaluate"):
-        return _evaluate_locked(run_dir, top, config, episodes, partners, checkpoint, seed)
+    lock = top if dest == run_dir else dest
+    lock.mkdir(parents=True, exist_ok=True)
+    with run_lock(lock, "transam evaluate"):
+        return _evaluate_locked(run_dir, top, dest, config, episodes, partners, checkpoint, seed)
 
 
 def _evaluate_locked(
     run_dir: Path,
     top: Path,
+    dest: Path,
     config: TrainConfig,
     episodes: int,
     partners: str,
@@ -191,12 +173,11 @@ def _evaluate_locked(
     seed: int,
 ) -> dict[str, Any]:
     from transam.partners.learned import population_digest
-    from transam.train.a2c import steps_per_update
     from transam.train.programs import env_and_model, program_key
 
     population = population_for(config.partners, partners)
     notes: list[str] = []
-    ckpt, state = _restore(config, run_dir, checkpoint, notes)
+    w = restore_weights(config, run_dir, checkpoint, notes)
 
     eval_config = dataclasses.replace(config, partners=population)
     env, model = env_and_model(eval_config)
@@ -204,14 +185,14 @@ def _evaluate_locked(
     partner_ids = balanced_partners(episodes, env.num_partners)
     run = _program(program_key(eval_config), episodes)
     ep = jax.device_get(
-        run(state.policy_params, state.model_params, jax.random.key(seed), jnp.asarray(partner_ids))
+        run(w.policy_params, w.model_params, jax.random.key(seed), jnp.asarray(partner_ids))
     )
     reward = np.asarray(ep.reward, np.float64)
     live = np.asarray(ep.live, np.float64)
     labels = np.asarray(ep.partner)
     returns = reward.sum(0)
 
-    if not (top / "final.json").exists():
+    if not (top / "final.json").exists() and not is_pretrained(run_dir):
         notes.append("the run has not finished training (no final.json)")
     if partners == "heldout" and config.partners != "default":
         notes.append(
@@ -237,8 +218,8 @@ def _evaluate_locked(
         "trained_partners": config.partners,
         "population_digest": digest,
         "trained_population_digest": trained_digest,
-        "checkpoint": ckpt.relative_to(run_dir).as_posix(),
-        "step": int(state.update) * steps_per_update(config),
+        "checkpoint": w.source,
+        "step": w.step,
         "episodes": episodes,
         "greedy": config.eval.greedy,
         "return": {"mean": float(returns.mean()), "std": float(returns.std())},
@@ -275,10 +256,10 @@ def _evaluate_locked(
             explained_variance=np.asarray(ratio),
             t=last,
         )
-        write_atomic(projection_path(run_dir, partners), buf.getvalue())
+        write_atomic(projection_path(dest, partners), buf.getvalue())
     out["notes"] = notes
 
-    path = evaluation_path(run_dir, partners)
+    path = evaluation_path(dest, partners)
     write_json(path, out)
     write_atomic(path.with_suffix(".png"), evaluation_figure(out, teams, labels, pca))
     return out
