@@ -74,6 +74,7 @@ def test_demo_trains_and_compares_with_a_random_agent(
     out = tmp_path / "demo"
     # NAM keeps the compile short; TransAM's training path is tested in test_methods.py.
     args = ["demo", "--method", "nam", "--total-steps", "100", "--out", str(out), "--no-progress"]
+    args.extend(["--pretrained-episodes", "0"])  # the shipped runs: tests/test_pretrained.py
     main([*args, "--a2c.num-envs", "2", "--eval.every-episodes", "2", "--eval.episodes", "4"])
     text = capsys.readouterr().out
     assert "final evaluation: spread / nam" in text and "uniformly random agent" in text

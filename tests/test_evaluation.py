@@ -16,8 +16,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from transam.cli import Evaluate, Export
+from transam.cli import Evaluate, Export, _print_showcase
 from transam.compose import make_env
+from transam.evaluation import showcase, weights
 from transam.evaluation.final import balanced_partners, evaluate_run, population_for
 from transam.evaluation.probe import linear_probe, pca_2d, stratified_split
 from transam.evaluation.weights import export_run
@@ -305,3 +306,30 @@ def test_a_pretrained_run_whose_settings_do_not_fit_its_weights_is_refused(
 def test_unknown_pretrained_name_lists_the_shipped_ones(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"no run directory 'spread-nope'.*shipped pretrained"):
         evaluate_run("spread-nope", episodes=EPISODES, out=tmp_path / "ev")
+
+
+def test_the_demo_shows_each_shipped_run_beside_random_play_and_the_levels(
+    run_dir: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    shipped = tmp_path / "package"
+    export_run(run_dir, shipped / "spread-liam")
+    export_run(run_dir, shipped / "other-env")
+    card = json.loads((shipped / "other-env" / "card.json").read_text())
+    write_json(shipped / "other-env" / "card.json", {**card, "env": "tag"})
+    monkeypatch.setattr(weights, "PRETRAINED_DIR", shipped)
+    monkeypatch.chdir(tmp_path)  # the outputs go to runs/pretrained/NAME
+    assert weights.pretrained_names() == ["other-env", "spread-liam"]
+    assert showcase.shipped_for("spread") == ["spread-liam"]
+    _print_showcase("spread", EPISODES)
+    text = capsys.readouterr().out
+    for row in ("spread-liam", "random agent", "landmark rule", "memoryless", "by step"):
+        assert row in text, row
+    res = json.loads((tmp_path / "runs/pretrained/spread-liam/eval_train.json").read_text())
+    assert f"{res['return']['mean']:.4g}" in text
+    random = showcase.random_reference("spread-liam", EPISODES)
+    assert f"{random['mean']:.4g}" in text and random["mean"] != res["return"]["mean"]
+    assert weights.resolve_run("spread-liam") == shipped / "spread-liam"
+    assert weights.is_shipped(shipped / "spread-liam") and not weights.is_shipped(run_dir)

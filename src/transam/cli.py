@@ -275,11 +275,19 @@ class Demo(TrainConfig):
     preset: PresetName = "none"
     """start from a named set of settings (as `transam train --preset`)"""
 
+    pretrained_episodes: int = 200
+    """episodes for each shipped pretrained run of --env, shown before training (0: skip)"""
+
     def run(self) -> None:
+        from transam.models.base import ACC_NEWEST
+        from transam.reproduce.report.results import partner_levels
         from transam.rundir import read_metrics, seed_dirs
         from transam.train.programs import uniform_policy_eval
 
         config = TrainConfig(**{f.name: getattr(self, f.name) for f in fields(TrainConfig)})
+        config.validate()
+        if self.pretrained_episodes:
+            _print_showcase(config.env, self.pretrained_episodes)
         if not _run_train(config):
             return
         records = read_metrics(seed_dirs(config)[0] / "metrics.jsonl")
@@ -291,6 +299,70 @@ class Demo(TrainConfig):
             f"{_num(last['eval/return'])} after {last['step']:,}; a uniformly random agent on "
             f"the same episodes: {_num(rand)}"
         )
+        levels = partner_levels([config.env])[config.env] if config.partners == "default" else None
+        key = f"eval/{ACC_NEWEST}"
+        if key in last and levels:
+            console.print(
+                f"partner-action accuracy (newest position): {last[key]:.3f} after "
+                f"{last['step']:,} steps; the memoryless level from the agent's own view "
+                f"{levels['memoryless_own_accuracy']:.3f}"
+            )
+
+
+def _print_showcase(env: str, episodes: int) -> None:
+    """The shipped pretrained runs of ``env`` against the references (see
+    transam.evaluation.showcase); nothing when none is shipped."""
+    from transam.evaluation.final import output_dir
+    from transam.evaluation.showcase import accuracy_by_step, showcase, standard_error
+    from transam.models.base import ACC_NEWEST
+
+    shown = showcase(env, episodes)
+    if shown is None:
+        return
+    table = Table(
+        title=f"{env}: shipped pretrained runs against the default partners, {episodes} episodes",
+        caption="accuracy: of the partners' actions, predicted at the newest position from the "
+        "agent's own trajectory; memoryless: an MLP trained to predict them from the agent's "
+        "current observation alone (the population's recorded level)",
+    )
+    for col in ("agent", "steps", "return", "± s.e.", "accuracy"):
+        table.add_column(col, justify="right" if col != "agent" else "left")
+    for name, res in shown.runs.items():
+        acc = f"{res[ACC_NEWEST]:.3f}" if ACC_NEWEST in res else "-"
+        r = res["return"]
+        se = _num(standard_error(r, episodes))
+        table.add_row(name, f"{res['step']:,}", _num(r["mean"]), se, acc)
+    table.add_row(
+        "random agent (same episodes)",
+        "-",
+        _num(shown.random["mean"]),
+        _num(standard_error(shown.random, episodes)),
+        "-",
+    )
+    if shown.landmark:
+        lm = shown.landmark
+        table.add_row(
+            "landmark rule",
+            "-",
+            _num(lm["mean"]),
+            _num(standard_error(lm, int(lm["n"]))),
+            "-",
+        )
+    if shown.levels:
+        own = shown.levels["memoryless_own_accuracy"]
+        table.add_row("memoryless (own view)", "-", "-", "-", f"{own:.3f}")
+        table.add_row("ceiling", "-", "-", "-", f"{shown.levels['action_ceiling']:.3f}")
+    console.print(table)
+    for name, res in shown.runs.items():
+        curve = accuracy_by_step(res)
+        if curve:
+            steps = Table(title=f"{name}: partner-action accuracy by step of the episode")
+            steps.add_column("t")
+            for t, _ in curve:
+                steps.add_column(str(t), justify="right")
+            steps.add_row("accuracy", *(f"{a:.2f}" for _, a in curve))
+            console.print(steps)
+        console.print(f"figure: {output_dir(name) / 'eval_train.png'}")
 
 
 @dataclass(frozen=True)

@@ -59,7 +59,7 @@ import numpy as np
 from transam import registry
 from transam.evaluation.figure import evaluation_figure
 from transam.evaluation.probe import linear_probe, pca_2d
-from transam.evaluation.weights import PRETRAINED_DIR, is_pretrained, resolve_run, restore_weights
+from transam.evaluation.weights import is_pretrained, is_shipped, resolve_run, restore_weights
 from transam.models.base import ACC_ALL, ACC_NEWEST, MSE_ALL
 from transam.rundir import (
     EVAL_PARTNERS,
@@ -118,6 +118,30 @@ def _program(config: TrainConfig, n: int) -> Callable[..., Any]:
     return jax.jit(make_episodes(config, env, model, n, positions=True))
 
 
+def random_reference(run_dir: str | Path, episodes: int = 100, seed: int = 0) -> dict[str, float]:
+    """The return of a uniformly random controlled agent (the run's policy with its actor
+    zeroed, so every action is equally likely) on the episodes ``evaluate_run`` plays with the
+    same ``episodes`` and ``seed``: the same partners and the same starts."""
+    from transam.train.programs import program_key
+
+    run_dir = resolve_run(run_dir)
+    config = load_run_config(run_dir)
+    w = restore_weights(config, run_dir, None, [])
+    zeros = jax.tree.map(jnp.zeros_like, w.policy_params)
+    env_partners = jnp.asarray(balanced_partners(episodes, _num_partners(config)))
+    ep = _program(program_key(config), episodes)(
+        zeros, w.model_params, jax.random.key(seed), env_partners
+    )
+    returns = np.asarray(jax.device_get(ep.reward), np.float64).sum(0)
+    return {"mean": float(returns.mean()), "std": float(returns.std())}
+
+
+def _num_partners(config: TrainConfig) -> int:
+    from transam.train.programs import env_and_model
+
+    return env_and_model(config)[0].num_partners
+
+
 def _per_step_mean(values: np.ndarray, live: np.ndarray) -> list[float | None]:
     count = live.sum(1)
     return [float(v / c) if c > 0 else None for v, c in zip(values.sum(1), count, strict=True)]
@@ -129,7 +153,7 @@ def output_dir(run_dir: str | Path, out: str | Path | None = None) -> Path:
     if out is not None:
         return Path(out)
     run_dir = resolve_run(run_dir)
-    if is_pretrained(run_dir) and run_dir.parent == PRETRAINED_DIR:
+    if is_shipped(run_dir):
         return Path("runs/pretrained") / run_dir.name
     return run_dir
 

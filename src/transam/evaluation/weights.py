@@ -63,6 +63,11 @@ def is_pretrained(run_dir: str | Path) -> bool:
     return (Path(run_dir) / WEIGHTS_FILE).is_file()
 
 
+def is_shipped(run_dir: str | Path) -> bool:
+    """Whether ``run_dir`` is one of the package's pretrained runs."""
+    return is_pretrained(run_dir) and Path(run_dir).resolve().parent == PRETRAINED_DIR.resolve()
+
+
 def pretrained_names() -> list[str]:
     """The shipped pretrained runs, by name."""
     if not PRETRAINED_DIR.is_dir():
@@ -207,6 +212,7 @@ def export_run(
     card = {
         "env": config.env,
         "method": config.method,
+        "partners": config.partners,
         "seed": config.seed,
         "step": w.step,
         "checkpoint": w.source,

@@ -1,0 +1,83 @@
+"""What the demo shows before it trains: the shipped pretrained runs of an environment against
+its default partners, beside the references that say whether they learned anything.
+
+Return references: a uniformly random controlled agent on the same evaluation episodes
+(:func:`~transam.evaluation.final.random_reference`) and, on Spread, the landmark rule of
+:func:`transam.partners.spread.landmark_agent` (its own episodes, the same partner mix).
+Accuracy references: the population's memoryless level from the controlled agent's own view
+(the best a predictor of the partners' actions can do from the current observation alone,
+recorded in the population's manifest by ``transam partners diversity --record``) and the
+ceiling.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from transam.evaluation.final import evaluate_run, random_reference
+from transam.evaluation.weights import pretrained_dir, pretrained_names, read_card
+from transam.models.base import ACC_NEWEST
+
+
+@dataclass(frozen=True)
+class Showcase:
+    env: str
+    episodes: int
+    runs: dict[str, dict[str, Any]]  # name -> evaluate_run's result
+    random: dict[str, float]  # on the first run's episodes
+    landmark: dict[str, float] | None  # Spread only
+    levels: dict[str, Any] | None  # the population's recorded accuracy levels
+
+
+def shipped_for(env: str) -> list[str]:
+    """The shipped pretrained runs of ``env`` that play its default partners, TransAM first."""
+    cards = {n: read_card(pretrained_dir(n)) for n in pretrained_names()}
+    names = [n for n, c in cards.items() if c.get("env") == env and c.get("partners") == "default"]
+    return sorted(names, key=lambda n: (cards[n].get("method") != "transam", n))
+
+
+def landmark_return(episodes: int, seed: int) -> dict[str, float]:
+    """The landmark rule's mean return on Spread's default partners (``episodes`` episodes)."""
+    import jax
+
+    from transam.compose import make_env
+    from transam.envs.rollout import episode_stats, make_random_rollout
+    from transam.partners.spread import landmark_agent
+
+    env = make_env("spread")
+    rollout = make_random_rollout(env, episodes, env.spec.episode_len, landmark_agent)
+    returns = episode_stats(rollout(jax.random.key(seed))[1]).returns
+    return {"mean": float(returns.mean()), "std": float(returns.std()), "n": len(returns)}
+
+
+def showcase(env: str, episodes: int = 200, seed: int = 0) -> Showcase | None:
+    """Evaluate each shipped pretrained run of ``env`` (outputs in runs/pretrained/NAME), or
+    None when the package ships none for it."""
+    from transam.reproduce.report.results import partner_levels
+
+    names = shipped_for(env)
+    if not names:
+        return None
+    runs = {n: evaluate_run(n, episodes, seed=seed) for n in names}
+    return Showcase(
+        env=env,
+        episodes=episodes,
+        runs=runs,
+        random=random_reference(names[0], episodes, seed),
+        landmark=landmark_return(episodes, seed) if env == "spread" else None,
+        levels=partner_levels([env])[env],
+    )
+
+
+def standard_error(r: dict[str, float], n: int) -> float:
+    return float(r["std"] / np.sqrt(max(n, 1)))
+
+
+def accuracy_by_step(res: dict[str, Any], every: int = 4) -> list[tuple[int, float]]:
+    """(t, newest-position accuracy) at every ``every``-th step of the episode and the last."""
+    curve = res["per_step"].get(ACC_NEWEST) or []
+    steps = sorted({*range(0, len(curve), every), len(curve) - 1}) if curve else []
+    return [(t, curve[t]) for t in steps if curve[t] is not None]
