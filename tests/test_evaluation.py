@@ -329,7 +329,9 @@ def test_the_demo_shows_each_shipped_run_beside_random_play_and_the_levels(
         assert row in text, row
     res = json.loads((tmp_path / "runs/pretrained/spread-liam/eval_train.json").read_text())
     assert f"{res['return']['mean']:.4g}" in text
-    random = showcase.random_reference("spread-liam", EPISODES)
-    assert f"{random['mean']:.4g}" in text and random["mean"] != res["return"]["mean"]
+    trained, random = showcase.paired_random_returns("spread-liam", EPISODES)
+    assert trained.mean() == pytest.approx(res["return"]["mean"])  # the same episodes
+    assert f"{random.mean():.4g}" in text and random.mean() != trained.mean()
+    assert f"{(trained - random).mean():+.2f}" in text
     assert weights.resolve_run("spread-liam") == shipped / "spread-liam"
     assert weights.is_shipped(shipped / "spread-liam") and not weights.is_shipped(run_dir)

@@ -321,37 +321,30 @@ def _print_showcase(env: str, episodes: int) -> None:
         return
     table = Table(
         title=f"{env}: shipped pretrained runs against the default partners, {episodes} episodes",
-        caption="accuracy: of the partners' actions, predicted at the newest position from the "
-        "agent's own trajectory; memoryless: an MLP trained to predict them from the agent's "
-        "current observation alone (the population's recorded level)",
+        caption="vs random: return minus the random agent's on the same episodes (same "
+        "partners and starts), ± its standard error; accuracy: of the partners' actions, "
+        "predicted at the newest position from the agent's own trajectory; memoryless: an MLP "
+        "trained to predict them from the agent's current observation alone (the population's "
+        "recorded level)",
     )
-    for col in ("agent", "steps", "return", "± s.e.", "accuracy"):
+    for col in ("agent", "steps", "return", "± s.e.", "vs random", "accuracy"):
         table.add_column(col, justify="right" if col != "agent" else "left")
     for name, res in shown.runs.items():
         acc = f"{res[ACC_NEWEST]:.3f}" if ACC_NEWEST in res else "-"
-        r = res["return"]
+        r, g = res["return"], shown.gain[name]
         se = _num(standard_error(r, episodes))
-        table.add_row(name, f"{res['step']:,}", _num(r["mean"]), se, acc)
-    table.add_row(
-        "random agent (same episodes)",
-        "-",
-        _num(shown.random["mean"]),
-        _num(standard_error(shown.random, episodes)),
-        "-",
-    )
+        vs = f"{g['mean']:+.2f} ± {g['se']:.2f}"
+        table.add_row(name, f"{res['step']:,}", _num(r["mean"]), se, vs, acc)
+    rnd = shown.random
+    table.add_row("random agent", "-", _num(rnd["mean"]), _num(rnd["se"]), "0", "-")
     if shown.landmark:
         lm = shown.landmark
-        table.add_row(
-            "landmark rule",
-            "-",
-            _num(lm["mean"]),
-            _num(standard_error(lm, int(lm["n"]))),
-            "-",
-        )
+        se = _num(standard_error(lm, int(lm["n"])))
+        table.add_row("landmark rule", "-", _num(lm["mean"]), se, "-", "-")
     if shown.levels:
         own = shown.levels["memoryless_own_accuracy"]
-        table.add_row("memoryless (own view)", "-", "-", "-", f"{own:.3f}")
-        table.add_row("ceiling", "-", "-", "-", f"{shown.levels['action_ceiling']:.3f}")
+        table.add_row("memoryless (own view)", "-", "-", "-", "-", f"{own:.3f}")
+        table.add_row("ceiling", "-", "-", "-", "-", f"{shown.levels['action_ceiling']:.3f}")
     console.print(table)
     for name, res in shown.runs.items():
         curve = accuracy_by_step(res)
@@ -510,11 +503,13 @@ class Export:
     """the pretrained run's directory (replaced if it already holds one)"""
     checkpoint: str | None = None
     """checkpoint file name or chunk number (default: the newest that verifies)"""
+    summary: str = ""
+    """one line for card.json and `transam pretrained`: how it was trained, what it shows"""
 
     def run(self) -> None:
         from transam.evaluation.weights import export_run
 
-        card = export_run(self.run_dir, self.out, self.checkpoint)
+        card = export_run(self.run_dir, self.out, self.checkpoint, self.summary)
         console.print(
             f"wrote {self.out}: {card['env']}/{card['method']} seed {card['seed']}, "
             f"{card['checkpoint']} (step {card['step']:,})"

@@ -118,22 +118,26 @@ def _program(config: TrainConfig, n: int) -> Callable[..., Any]:
     return jax.jit(make_episodes(config, env, model, n, positions=True))
 
 
-def random_reference(run_dir: str | Path, episodes: int = 100, seed: int = 0) -> dict[str, float]:
-    """The return of a uniformly random controlled agent (the run's policy with its actor
-    zeroed, so every action is equally likely) on the episodes ``evaluate_run`` plays with the
-    same ``episodes`` and ``seed``: the same partners and the same starts."""
+def paired_random_returns(
+    run_dir: str | Path, episodes: int = 100, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-episode returns of the run's policy and of a uniformly random controlled agent (the
+    policy with its actor zeroed: every action equally likely) on the episodes ``evaluate_run``
+    plays with the same ``episodes`` and ``seed``: the same partners and starts, so the
+    difference of the two has a far smaller standard error than either return."""
     from transam.train.programs import program_key
 
     run_dir = resolve_run(run_dir)
     config = load_run_config(run_dir)
     w = restore_weights(config, run_dir, None, [])
+    run = _program(program_key(config), episodes)
+    partner_ids = jnp.asarray(balanced_partners(episodes, _num_partners(config)))
     zeros = jax.tree.map(jnp.zeros_like, w.policy_params)
-    env_partners = jnp.asarray(balanced_partners(episodes, _num_partners(config)))
-    ep = _program(program_key(config), episodes)(
-        zeros, w.model_params, jax.random.key(seed), env_partners
-    )
-    returns = np.asarray(jax.device_get(ep.reward), np.float64).sum(0)
-    return {"mean": float(returns.mean()), "std": float(returns.std())}
+    out = []
+    for params in (w.policy_params, zeros):
+        ep = run(params, w.model_params, jax.random.key(seed), partner_ids)
+        out.append(np.asarray(jax.device_get(ep.reward), np.float64).sum(0))
+    return out[0], out[1]
 
 
 def _num_partners(config: TrainConfig) -> int:

@@ -2,8 +2,10 @@
 its default partners, beside the references that say whether they learned anything.
 
 Return references: a uniformly random controlled agent on the same evaluation episodes
-(:func:`~transam.evaluation.final.random_reference`) and, on Spread, the landmark rule of
-:func:`transam.partners.spread.landmark_agent` (its own episodes, the same partner mix).
+(:func:`~transam.evaluation.final.paired_random_returns`: the same partners and starts, so
+each run's gain over it is measured pairwise, with a small standard error) and, on Spread,
+the landmark rule of :func:`transam.partners.spread.landmark_agent` (its own episodes, the
+same partner mix).
 Accuracy references: the population's memoryless level from the controlled agent's own view
 (the best a predictor of the partners' actions can do from the current observation alone,
 recorded in the population's manifest by ``transam partners diversity --record``) and the
@@ -17,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from transam.evaluation.final import evaluate_run, random_reference
+from transam.evaluation.final import evaluate_run, paired_random_returns
 from transam.evaluation.weights import pretrained_dir, pretrained_names, read_card
 from transam.models.base import ACC_NEWEST
 
@@ -27,7 +29,8 @@ class Showcase:
     env: str
     episodes: int
     runs: dict[str, dict[str, Any]]  # name -> evaluate_run's result
-    random: dict[str, float]  # on the first run's episodes
+    gain: dict[str, dict[str, float]]  # name -> {mean, se}: return minus random's, per episode
+    random: dict[str, float]  # on the same episodes (the first run's random agent)
     landmark: dict[str, float] | None  # Spread only
     levels: dict[str, Any] | None  # the population's recorded accuracy levels
 
@@ -62,14 +65,22 @@ def showcase(env: str, episodes: int = 200, seed: int = 0) -> Showcase | None:
     if not names:
         return None
     runs = {n: evaluate_run(n, episodes, seed=seed) for n in names}
+    paired = {n: paired_random_returns(n, episodes, seed) for n in names}
+    gain = {n: mean_se(t - r) for n, (t, r) in paired.items()}
     return Showcase(
         env=env,
         episodes=episodes,
         runs=runs,
-        random=random_reference(names[0], episodes, seed),
+        gain=gain,
+        random=mean_se(paired[names[0]][1]),
         landmark=landmark_return(episodes, seed) if env == "spread" else None,
         levels=partner_levels([env])[env],
     )
+
+
+def mean_se(x: np.ndarray) -> dict[str, float]:
+    """Mean, standard deviation and standard error of the mean of per-episode values."""
+    return {"mean": float(x.mean()), "std": float(x.std()), "se": float(x.std() / np.sqrt(len(x)))}
 
 
 def standard_error(r: dict[str, float], n: int) -> float:

@@ -187,7 +187,7 @@ def _read_weights(path: Path, template: Any) -> Weights:
 
 
 def export_run(
-    run_dir: str | Path, out: str | Path, checkpoint: str | int | None = None
+    run_dir: str | Path, out: str | Path, checkpoint: str | int | None = None, summary: str = ""
 ) -> dict[str, Any]:
     """Write the pretrained run ``out`` from one seed of a trained run (its newest verified
     checkpoint, or the named one); returns its card. Refuses an existing ``out`` that is not a
@@ -216,8 +216,7 @@ def export_run(
         "seed": config.seed,
         "step": w.step,
         "checkpoint": w.source,
-        "from_run": str(top.name),
-        "settings": "config.json",
+        "summary": summary,
     }
     write_json(tmp / CARD_FILE, card)
     for p in tmp.iterdir():
