@@ -148,6 +148,8 @@ def test_result_schema_and_files(run_dir: Path, result: dict[str, Any]) -> None:
     assert per["cum_return"][-1] == pytest.approx(result["return"]["mean"], rel=1e-9)
     # Spread's rewards are negative every step: the cumulative reward falls.
     assert all(b < a for a, b in zip(per["cum_return"], per["cum_return"][1:], strict=False))
+    freq = result["action_frequency"]
+    assert len(freq) == 5 and sum(freq) == pytest.approx(1.0) and min(freq) > 0.0  # sampled
     teams = make_env("spread").population.team_names
     assert list(result["per_partner_return"]) == list(teams)  # balanced: every partner plays
     probe = result["probe"]

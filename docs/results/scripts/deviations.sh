@@ -9,11 +9,16 @@
 #   docs/results/scripts/deviations.sh                  all rows (13 runs of 3 seeds: long)
 #   ONLY="clock critic_no_z" docs/results/scripts/deviations.sh     some rows
 #   SMOKE=1 docs/results/scripts/deviations.sh          5k steps, 2 seeds, default population
+#   PRESET=none ONLY=gae_advantage docs/results/scripts/deviations.sh
+#                       the row on top of the defaults (the preset with the action loss fixed)
+#                       instead of the preset: outputs in runs/deviations-defaults, baseline
+#                       runs/parity-shared/defaults
 # Re-running resumes unfinished runs and skips finished ones. Overrides as in parity.sh, plus
 # BASELINE (the preset run) and TABLE (output markdown).
 set -euo pipefail
 
 TRANSAM=${TRANSAM:-transam}
+PRESET=${PRESET:-authors}
 if [[ -n "${SMOKE:-}" ]]; then
   PARTNERS=${PARTNERS:-default}
   OUT=${OUT:-runs/deviations-smoke}
@@ -26,6 +31,11 @@ if [[ -n "${SMOKE:-}" ]]; then
   TABLE=${TABLE:-$OUT/deviations.md}
 else
   PARTNERS=${PARTNERS:-runs/authors-pop}
+  if [[ $PRESET == none ]]; then
+    OUT=${OUT:-runs/deviations-defaults}
+    BASELINE=${BASELINE:-runs/parity-shared/defaults}
+    TABLE=${TABLE:-docs/results/parity/deviations-defaults.md}
+  fi
   OUT=${OUT:-runs/deviations}
   STEPS=${STEPS:-625000}
   SEEDS=${SEEDS:-3}
@@ -60,7 +70,7 @@ selected() {
 }
 
 args=()
-if selected proper_action_ce && [[ -f "$PARITY/defaults/config.json" ]]; then
+if [[ $PRESET != none ]] && selected proper_action_ce && [[ -f "$PARITY/defaults/config.json" ]]; then
   args+=("proper_action_ce (--model.action-loss ce, the defaults)=$PARITY/defaults")
 fi
 for row in "${ROWS[@]}"; do
@@ -72,8 +82,8 @@ for row in "${ROWS[@]}"; do
   [[ -f "$dir/config.json" ]] && resume=(--resume)
   echo "== $name ($flags): $dir"
   # shellcheck disable=SC2086  # flags is a list
-  "$TRANSAM" train --env spread --method transam --preset authors --partners "$PARTNERS" \
-    --total-steps "$STEPS" --num-seeds "$SEEDS" \
+  "$TRANSAM" train --env spread --method transam --preset "$PRESET" --partners "$PARTNERS" \
+    --total-steps "$STEPS" --num-seeds "$SEEDS" --a2c.anneal-steps 10000000 \
     --eval.every-episodes "$EVAL_EVERY" --eval.episodes "$EVAL_EPISODES" \
     --out "$dir" --no-progress "${resume[@]}" $flags
   args+=("$name ($flags)=$dir")

@@ -37,7 +37,9 @@ partners.json's; None for scripted partners or runs older than that file), ``che
 relative to the run directory: the named one, or the newest that verifies, any newer one that
 does not being named in ``notes``), ``step``, ``episodes``, ``greedy``, ``return`` {mean, std},
 the :data:`EVAL_METRICS` the model predicts, ``policy_entropy`` (the policy's mean entropy
-per step, nats), ``per_partner_return`` {team: mean},
+per step, nats), ``action_frequency`` [A] (the share of each of the controlled agent's actions
+over the episodes' steps; on the MPE games action 0 is "no move"), ``per_partner_return``
+{team: mean},
 ``per_step`` {cum_return, and a curve per metric present, policy_entropy included},
 ``probe`` {accuracy, per_step, chance, train_episodes, test_episodes, features, ridge} and
 ``pca`` {explained_variance} (both absent without an embedding), ``notes`` [str].
@@ -258,6 +260,10 @@ def _evaluate_locked(
             score = np.asarray(ep.scores[key], np.float64)
             out[key] = float(score.sum() / live.sum())
             per_step[key] = _per_step_mean(score, live)
+    actions = np.asarray(ep.action)[live > 0]
+    out["action_frequency"] = [
+        float(f) for f in np.bincount(actions, minlength=env.spec.num_actions) / len(actions)
+    ]
     out["per_partner_return"] = {
         teams[p]: float(returns[labels == p].mean()) for p in np.unique(labels)
     }

@@ -67,6 +67,7 @@ class Episodes:
     z: jax.Array  # [T, N, embed_dim] the embedding the policy acted on at t
     partner: jax.Array  # [N] int32 partner index of each episode
     scores: dict[str, jax.Array]  # [T, N] per-step metrics where predicted, 0 when dead
+    action: jax.Array  # [T, N] int32 the controlled agent's action (meaningless when dead)
 
 
 EpisodesFn = Callable[[Any, Any, jax.Array, jax.Array | None], Episodes]
@@ -145,11 +146,14 @@ def make_episodes(
                 if w_obs is not None:
                     sq = ((w_obs - past_obs.reshape(n, k, -1)) ** 2).mean(-1)
                     scores[MSE_ALL] = (sq * w).sum(-1) / count * live
-            out = (ts.reward * live, live, z, scores)
+            out = (ts.reward * live, live, z, scores, action)
             return (env_state, x, pc, mc, alive & ~ts.done, past_obs, past_act), out
 
-        _, (reward, live, z, scores) = jax.lax.scan(body, init, jax.random.split(k_run, length))
-        return Episodes(reward=reward, live=live, z=z, partner=state0.partner, scores=scores)
+        keys = jax.random.split(k_run, length)
+        _, (reward, live, z, scores, action) = jax.lax.scan(body, init, keys)
+        return Episodes(
+            reward=reward, live=live, z=z, partner=state0.partner, scores=scores, action=action
+        )
 
     return episodes
 
