@@ -74,3 +74,32 @@ def test_grid_file_keeps_one_budget_and_never_adopts_a_foreign_directory(tmp_pat
     with pytest.raises(ConfigError, match="not empty"):
         grid.open_grid(other, "smoke", specs, [])
     assert (other / "precious.txt").read_text() == "keep"
+
+
+def test_a_grid_keeps_one_partner_population_and_its_runs_train_against_it(tmp_path) -> None:
+    out = tmp_path / "g"
+    specs = grid.grid_specs(["spread"], ["nam"], [0])
+    assert grid.grid_partners(out) == "default"  # no grid yet
+    grid.open_grid(out, "smoke", specs, ["transam"], partners="heldout")
+    assert grid.grid_partners(out) == "heldout"
+    assert json.loads((out / "grid.json").read_text())["partners"] == "heldout"
+    config = grid.run_config(specs[0], grid.BUDGETS["smoke"], out, grid.grid_partners(out))
+    assert config.partners == "heldout"
+    with pytest.raises(ConfigError, match=r"against partners 'heldout'; use another --out"):
+        grid.open_grid(out, "smoke", specs, [], partners="default")
+    old = tmp_path / "old"  # a grid.json written before the entry existed
+    grid.open_grid(old, "smoke", specs, [])
+    saved = json.loads((old / "grid.json").read_text())
+    del saved["partners"]
+    (old / "grid.json").write_text(json.dumps(saved))
+    assert grid.grid_partners(old) == "default"
+    grid.open_grid(old, "smoke", specs, [])  # resumes as the default population
+
+
+def test_reproduce_refuses_an_unknown_population_before_writing(tmp_path) -> None:
+    from transam.cli import main
+
+    out = tmp_path / "g"
+    with pytest.raises(SystemExit, match="unknown partners 'nope'; valid choices: default"):
+        main(["reproduce", "--budget", "smoke", "--out", str(out), "--partners", "nope"])
+    assert not out.exists()

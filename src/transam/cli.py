@@ -387,9 +387,13 @@ class Reproduce:
     """Ray: GPUs reserved per run (fractions share a GPU)"""
     max_retries: int = 3
     """Ray: retries of a run whose worker or node died (it resumes from its checkpoint)"""
+    partners: str = "default"
+    """the partner population every run trains against: default, heldout, or a population
+    directory (manifest.json + default.safetensors; its one env only), e.g. the authors' own
+    Spread population from `transam partners import-authors`"""
 
     def run(self) -> None:
-
+        from transam.compose import make_env, resolve_partners
         from transam.reproduce import grid
         from transam.reproduce.report.build import build_report
 
@@ -397,17 +401,22 @@ class Reproduce:
         budget = grid.BUDGETS[self.budget]
         seeds = self.seeds or tuple(range(budget.seeds))
         specs = grid.grid_specs(self.envs, self.methods, seeds)
+        partners = resolve_partners(self.partners)
+        if partners != "default":
+            for env in self.envs:  # a population that does not fit an env fails before writing
+                make_env(env, partners=partners)
         out = Path(self.out)
         address = None if self.address == "local" else self.address
         if self.backend == "ray":  # a missing Ray or a bad address fails before writing
             from transam.reproduce.grid_ray import connect
 
             connect(address)
-        grid.open_grid(out, self.budget, specs, ["transam", *_ARGV])
+        grid.open_grid(out, self.budget, specs, ["transam", *_ARGV], partners)
         console.print(
             f"{len(specs)} runs ({len(self.envs)} envs x {len(self.methods)} methods x "
             f"{len(seeds)} seeds), budget {self.budget!r} "
-            f"({budget.total_steps:,} steps each) into {out}/ via {self.backend}"
+            f"({budget.total_steps:,} steps each), partners {partners!r}, into {out}/ via "
+            f"{self.backend}"
         )
         if self.backend == "ray":
             from transam.reproduce.grid_ray import run_ray

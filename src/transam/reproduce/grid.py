@@ -102,14 +102,18 @@ def grid_specs(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int]
     return [RunSpec(e, m, s) for e in envs for m in methods for s in seeds]
 
 
-def run_config(spec: RunSpec, budget: Budget, out: str | Path) -> TrainConfig:
-    """The training configuration of one grid run: the default settings plus the budget."""
+def run_config(
+    spec: RunSpec, budget: Budget, out: str | Path, partners: str = "default"
+) -> TrainConfig:
+    """The training configuration of one grid run: the default settings plus the budget, against
+    the grid's partner population."""
     # the registry's episode length: a grid is planned without building environments
     episode_len = registry.env_entry(spec.env).episode_len
     every = max(1, round(budget.total_steps / (budget.evals * episode_len)))
     return TrainConfig(
         env=spec.env,  # type: ignore[arg-type]
         method=spec.method,  # type: ignore[arg-type]
+        partners=partners,
         total_steps=budget.total_steps,
         seed=spec.seed,
         out=str(Path(out) / spec.rel),
@@ -142,7 +146,7 @@ def run_one(out: str | Path, spec: RunSpec, budget: Budget) -> dict[str, Any]:
     from transam.train.loop import train
 
     out = Path(out)
-    config = run_config(spec, budget, out)
+    config = run_config(spec, budget, out, grid_partners(out))
     run_dir = Path(config.run_dir)
     finished = (run_dir / "final.json").exists()
     started = (run_dir / "config.json").exists()
@@ -190,8 +194,23 @@ def machine() -> dict[str, Any]:
     }
 
 
-def open_grid(out: Path, budget_name: str, specs: list[RunSpec], argv: list[str]) -> dict[str, Any]:
-    """Create or extend ``grid.json``; a grid directory keeps one budget."""
+def grid_partners(out: str | Path) -> str:
+    """The partner population a grid trains against (grid.json's ``partners``; "default" for a
+    grid without the entry or without grid.json)."""
+    path = Path(out) / "grid.json"
+    return json.loads(path.read_text()).get("partners", "default") if path.exists() else "default"
+
+
+def open_grid(
+    out: Path,
+    budget_name: str,
+    specs: list[RunSpec],
+    argv: list[str],
+    partners: str = "default",
+) -> dict[str, Any]:
+    """Create or extend ``grid.json``; a grid directory keeps one budget and one partner
+    population (``partners``: a shipped choice, or a population directory as an absolute
+    path)."""
     if budget_name not in BUDGETS:
         raise ConfigError(f"unknown budget {budget_name!r}; valid choices: {', '.join(BUDGETS)}")
     from transam.rundir import write_json
@@ -204,12 +223,18 @@ def open_grid(out: Path, budget_name: str, specs: list[RunSpec], argv: list[str]
                 f"--out {str(out)!r} holds a {grid.get('budget')!r} grid; use another --out for "
                 f"budget {budget_name!r}"
             )
+        if grid.get("partners", "default") != partners:
+            raise ConfigError(
+                f"--out {str(out)!r} holds a grid against partners "
+                f"{grid.get('partners', 'default')!r}; use another --out for partners {partners!r}"
+            )
     elif out.exists() and any(out.iterdir()):
         raise ConfigError(f"--out {str(out)!r} is not empty and holds no grid; choose another")
     else:
         grid = {
             "budget": budget_name,
             "budget_settings": dataclasses.asdict(BUDGETS[budget_name]),
+            "partners": partners,
             "runs": [],
             "invocations": [],
         }

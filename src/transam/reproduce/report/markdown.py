@@ -254,7 +254,9 @@ def render(results: dict[str, Any], table: Table) -> str:
         "",
         "## How this was run",
         "",
-        f"Budget **{grid['budget']}**:",
+        f"Budget **{grid['budget']}**, partners **{grid.get('partners', 'default')}** (the "
+        "population every run trained against; `heldout` evaluations are the shipped held-out "
+        "population):",
         "",
         *_md_table(
             ["setting", "value"],

@@ -159,6 +159,7 @@ def build_results(grid: Grid, table: Table, figures: dict[str, str]) -> dict[str
             "out": str(grid.out),
             "budget": grid.info.get("budget", "unknown"),
             "budget_settings": grid.info.get("budget_settings", {}),
+            "partners": grid.info.get("partners", "default"),
         },
         "compute": compute_summary(grid),
         "runs": runs_summary(grid),
