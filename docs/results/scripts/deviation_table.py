@@ -49,12 +49,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("runs", nargs="*", help="LABEL=RUN_DIR")
     parser.add_argument("--baseline", type=Path, required=True, help="the --preset authors run")
+    parser.add_argument("--baseline-label", default="preset (authors)")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     base = summary(args.baseline)
     head = ["run", "steps", "return", "Δ return", "accuracy", "Δ accuracy", "entropy"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for label, path in [("preset (authors)", str(args.baseline))] + [
+    for label, path in [(args.baseline_label, str(args.baseline))] + [
         tuple(s.split("=", 1)) for s in args.runs
     ]:
         s = summary(Path(path))
@@ -67,7 +68,7 @@ def main() -> None:
     note = (
         f"\n\nEach seed's mean over its evaluations in {WINDOW[0]:,}-{WINDOW[1]:,} steps (the "
         "last evaluation where a run is shorter), then mean ± 95% t-interval over seeds. "
-        "Δ: difference of the means from the preset run.\n"
+        f"Δ: difference of the means from the first row, {args.baseline_label}.\n"
     )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + note)

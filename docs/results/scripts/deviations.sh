@@ -89,4 +89,7 @@ for row in "${ROWS[@]}"; do
   args+=("$name ($flags)=$dir")
 done
 
-python "$HERE/deviation_table.py" --baseline "$BASELINE" --out "$TABLE" "${args[@]}"
+label="preset (authors)"
+[[ $PRESET == none ]] && label="defaults"
+python "$HERE/deviation_table.py" --baseline "$BASELINE" --baseline-label "$label" \
+  --out "$TABLE" "${args[@]}"
