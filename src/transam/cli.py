@@ -339,8 +339,7 @@ def _print_showcase(env: str, episodes: int) -> None:
     table.add_row("random agent", "-", _num(rnd["mean"]), _num(rnd["se"]), "0", "-")
     if shown.landmark:
         lm = shown.landmark
-        se = _num(standard_error(lm, int(lm["n"])))
-        table.add_row("landmark rule", "-", _num(lm["mean"]), se, "-", "-")
+        table.add_row("landmark rule", "-", _num(lm["mean"]), _num(lm["se"]), "-", "-")
     if shown.levels:
         own = shown.levels["memoryless_own_accuracy"]
         table.add_row("memoryless (own view)", "-", "-", "-", "-", f"{own:.3f}")

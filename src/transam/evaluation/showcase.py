@@ -52,8 +52,7 @@ def landmark_return(episodes: int, seed: int) -> dict[str, float]:
 
     env = make_env("spread")
     rollout = make_random_rollout(env, episodes, env.spec.episode_len, landmark_agent)
-    returns = episode_stats(rollout(jax.random.key(seed))[1]).returns
-    return {"mean": float(returns.mean()), "std": float(returns.std()), "n": len(returns)}
+    return mean_se(episode_stats(rollout(jax.random.key(seed))[1]).returns)
 
 
 def showcase(env: str, episodes: int = 200, seed: int = 0) -> Showcase | None:
