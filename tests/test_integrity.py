@@ -211,8 +211,10 @@ def test_reproduce_records_a_diverged_run_as_failed_and_goes_on(
     is still trained after the first failed, and grid.json records both with the message."""
     run_config = grid.run_config
 
-    def diverging(spec: grid.RunSpec, budget: grid.Budget, out: Any) -> TrainConfig:
-        cfg = run_config(spec, budget, out)
+    def diverging(
+        spec: grid.RunSpec, budget: grid.Budget, out: Any, partners: str = "default"
+    ) -> TrainConfig:
+        cfg = run_config(spec, budget, out, partners)
         return dataclasses.replace(
             cfg, partners="heuristic", a2c=dataclasses.replace(cfg.a2c, lr=1e4)
         )
