@@ -51,3 +51,13 @@ def test_shipped_run_beats_random_play_and_the_memoryless_level(name: str, tmp_p
         levels = partner_levels([config.env])[config.env]
         assert levels is not None
         assert res[ACC_NEWEST] > levels["memoryless_own_accuracy"] + 0.05, res[ACC_NEWEST]
+
+
+def test_the_cli_lists_the_shipped_runs(capsys: pytest.CaptureFixture[str]) -> None:
+    from transam.cli import main
+
+    main(["pretrained"])
+    text = capsys.readouterr().out
+    for name in pretrained_names():
+        assert name in text
+    assert "1000000" in text.replace(",", "")  # spread-transam's steps
