@@ -127,25 +127,19 @@ def paired_random_returns(
     policy with its actor zeroed: every action equally likely) on the episodes ``evaluate_run``
     plays with the same ``episodes`` and ``seed``: the same partners and starts, so the
     difference of the two has a far smaller standard error than either return."""
-    from transam.train.programs import program_key
+    from transam.train.programs import env_and_model, program_key, uniform_policy_params
 
     run_dir = resolve_run(run_dir)
     config = load_run_config(run_dir)
     w = restore_weights(config, run_dir, None, [])
     run = _program(program_key(config), episodes)
-    partner_ids = jnp.asarray(balanced_partners(episodes, _num_partners(config)))
-    zeros = jax.tree.map(jnp.zeros_like, w.policy_params)
+    num_partners = env_and_model(config)[0].num_partners
+    partner_ids = jnp.asarray(balanced_partners(episodes, num_partners))
     out = []
-    for params in (w.policy_params, zeros):
+    for params in (w.policy_params, uniform_policy_params(w.policy_params)):
         ep = run(params, w.model_params, jax.random.key(seed), partner_ids)
         out.append(np.asarray(jax.device_get(ep.reward), np.float64).sum(0))
     return out[0], out[1]
-
-
-def _num_partners(config: TrainConfig) -> int:
-    from transam.train.programs import env_and_model
-
-    return env_and_model(config)[0].num_partners
 
 
 def _per_step_mean(values: np.ndarray, live: np.ndarray) -> list[float | None]:

@@ -118,6 +118,12 @@ def run_programs(config: TrainConfig, vmapped: bool = False) -> Programs:
     return programs(program_key(config), tuple(sorted(set(chunks))), vmapped)
 
 
+def uniform_policy_params(policy_params: Any) -> Any:
+    """The policy's parameters all zeroed: every logit is equal, so the policy is a uniformly
+    random controlled agent (the "random play" reference of training and final evaluation)."""
+    return jax.tree.map(jnp.zeros_like, policy_params)
+
+
 def uniform_policy_eval(config: TrainConfig, seed: int, chunk: int) -> dict[str, float]:
     """What a uniformly random controlled agent scores on the evaluation episodes of chunk
     ``chunk`` (0-based) of seed ``seed``: the run's own "random" reference (actor zeroed, so
@@ -125,6 +131,6 @@ def uniform_policy_eval(config: TrainConfig, seed: int, chunk: int) -> dict[str,
     progs = run_programs(config)
     init_key, eval_key = jax.random.split(jax.random.key(seed))
     state = progs.init(init_key)
-    params = jax.tree.map(jnp.zeros_like, state.policy_params)
+    params = uniform_policy_params(state.policy_params)
     out = progs.evaluate(params, state.model_params, jax.random.fold_in(eval_key, chunk))
     return {k: float(v) for k, v in out.items() if not k.startswith("per_step/")}
