@@ -125,7 +125,7 @@ def test_config_round_trip_and_multi_seed_dirs(run_dir: Path, tmp_path: Path) ->
     write_json(old / "config.json", {**saved, "a2c": a2c})
     assert load_run_config(old).a2c.time_feature is False
     assert load_run_config(old).a2c.critic_z is True
-    assert (cfg.a2c.time_feature, cfg.a2c.critic_z) == (False, True)  # the authors' loop
+    assert (cfg.a2c.time_feature, cfg.a2c.critic_z) == (True, True)  # the defaults: with the clock
 
 
 # ------------------------------------------------------------------ the evaluation of a run

@@ -10,9 +10,9 @@
 #   ONLY="clock critic_no_z" docs/results/scripts/deviations.sh     some rows
 #   SMOKE=1 docs/results/scripts/deviations.sh          5k steps, 2 seeds, default population
 #   PRESET=none ONLY=gae_advantage docs/results/scripts/deviations.sh
-#                       the row on top of the defaults (the preset with the action loss fixed)
+#                       the row on top of the defaults (the preset with the action loss fixed and the clock)
 #                       instead of the preset: outputs in runs/deviations-defaults, baseline
-#                       runs/parity-shared/defaults
+#                       runs/parity/defaults (parity.sh's run of the current defaults)
 # Re-running resumes unfinished runs and skips finished ones. Overrides as in parity.sh, plus
 # BASELINE (the preset run) and TABLE (output markdown).
 set -euo pipefail
@@ -33,7 +33,7 @@ else
   PARTNERS=${PARTNERS:-runs/authors-pop}
   if [[ $PRESET == none ]]; then
     OUT=${OUT:-runs/deviations-defaults}
-    BASELINE=${BASELINE:-runs/parity-shared/defaults}
+    BASELINE=${BASELINE:-runs/parity/defaults}
     TABLE=${TABLE:-docs/results/parity/deviations-defaults.md}
   fi
   OUT=${OUT:-runs/deviations}
@@ -77,6 +77,10 @@ for row in "${ROWS[@]}"; do
   name=${row%%|*}
   flags=${row#*|}
   selected "$name" || continue
+  if [[ $PRESET == none && $name == clock ]]; then
+    echo "== clock: a default since 2026-12-02, so on top of the defaults it is the baseline; skipped"
+    continue
+  fi
   dir="$OUT/$name"
   resume=()
   [[ -f "$dir/config.json" ]] && resume=(--resume)

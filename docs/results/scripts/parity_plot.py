@@ -113,6 +113,9 @@ def main() -> None:
     parser.add_argument("runs", nargs="+", help="LABEL=RUN_DIR")
     parser.add_argument("--curve", type=Path, required=True, help="the authors' curve.csv")
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument(
+        "--title", default="TransAM on Spread: ours (mean, 95% CI over seeds) vs the authors' loop"
+    )
     args = parser.parse_args()
     import matplotlib
 
@@ -144,7 +147,7 @@ def main() -> None:
         ax.set_xlabel("controlled-agent steps")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
-    fig.suptitle("TransAM on Spread: ours (mean, 95% CI over seeds) vs the authors' loop")
+    fig.suptitle(args.title)
     fig.tight_layout()
     fig.savefig(args.out / "parity.png", dpi=120)
 
