@@ -2,8 +2,9 @@
 
 For each run directory (one seed, or ``seed_S/`` subdirectories of a multi-seed run): the
 evaluation return and the evaluation partner-action accuracy (newest window position) by
-training step, mean over seeds with a 95% t-interval, over the authors' single-seed curve
-(``curve.csv``: ``eval_return``, ``eval_action_accuracy_newest``, ``policy_entropy``). Writes
+training step, mean over seeds with a 95% t-interval, over the authors' curve
+(``curve.csv``: ``eval_return``, ``eval_action_accuracy_newest``, ``policy_entropy``; several,
+one per seed of their script, give their mean and 95% t-interval). Writes
 ``parity.png`` and ``parity.md`` (the window 400k-625k steps, where their curve levels off, the
 first evaluation, and every 50k-step evaluation side by side, so unfinished runs compare too)
 into ``--out``, and ``curves.csv``: every evaluation of every seed of every run (label, seed,
@@ -94,10 +95,19 @@ def by_step(seeds: list[list[dict[str, Any]]], key: str) -> tuple[np.ndarray, np
     return np.array(common), values
 
 
-def read_curve(path: Path) -> dict[str, np.ndarray]:
-    with open(path) as f:
-        rows = list(csv.DictReader(f))
-    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+def read_curves(paths: list[Path]) -> dict[str, np.ndarray]:
+    """The authors' curves (one curve.csv per seed) as {column: [seeds, steps]} over the
+    controlled steps every seed reached."""
+    seeds = []
+    for path in paths:
+        with open(path) as f:
+            rows = list(csv.DictReader(f))
+        seeds.append({int(float(r["controlled_steps"])): r for r in rows})
+    steps = sorted(set.intersection(*(set(s) for s in seeds)))
+    columns = [k for k in seeds[0][steps[0]] if k != "controlled_steps"]
+    out = {k: np.array([[float(s[x][k]) for x in steps] for s in seeds]) for k in columns}
+    out["controlled_steps"] = np.array(steps)
+    return out
 
 
 def window_mean(steps: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -111,7 +121,13 @@ def window_mean(steps: np.ndarray, values: np.ndarray) -> np.ndarray:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("runs", nargs="+", help="LABEL=RUN_DIR")
-    parser.add_argument("--curve", type=Path, required=True, help="the authors' curve.csv")
+    parser.add_argument(
+        "--curve",
+        type=Path,
+        nargs="+",
+        required=True,
+        help="the authors' curve.csv (one per seed of their script: mean and 95%% CI)",
+    )
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument(
         "--title", default="TransAM on Spread: ours (mean, 95% CI over seeds) vs the authors' loop"
@@ -122,7 +138,9 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    curve = read_curve(args.curve)
+    curve = read_curves(args.curve)
+    n_theirs = len(args.curve)
+    theirs_label = f"authors ({n_theirs} seed{'s' if n_theirs > 1 else ''})"
     runs = {}
     for spec in args.runs:
         label, _, path = spec.partition("=")
@@ -135,7 +153,10 @@ def main() -> None:
     for ax, (key, column, title) in zip(axes, METRICS, strict=True):
         if column in curve:
             steps = curve["controlled_steps"]
-            ax.plot(steps, curve[column], "k-", lw=1.5, label="authors (1 seed)")
+            mean, ci = mean_ci(curve[column])
+            ax.plot(steps, mean, "k-", lw=1.5, label=theirs_label)
+            if n_theirs > 1:
+                ax.fill_between(steps, mean - ci, mean + ci, color="k", alpha=0.12)
         for label, seeds in runs.items():
             steps, values = by_step(seeds, key)
             if not len(steps) or np.isnan(values).all():
@@ -153,11 +174,12 @@ def main() -> None:
 
     c_steps = curve["controlled_steps"]
     for label, seeds in [("authors (curve.csv)", None), *runs.items()]:
-        row = [label, "1" if seeds is None else str(len(seeds))]
+        row = [label, str(n_theirs) if seeds is None else str(len(seeds))]
         for key, column, _ in METRICS[:2]:
             if seeds is None:
-                first, win = curve[column][0], window_mean(c_steps, curve[column][None])
-                row += [f"{first:.3g}", f"{win[0]:.3g}"]
+                first = mean_ci(curve[column][:, :1])
+                win = mean_ci(window_mean(c_steps, curve[column])[:, None])
+                row += [_pm(first[0][0], first[1][0]), _pm(win[0][0], win[1][0])]
                 continue
             steps, values = by_step(seeds, key)
             if not len(steps):
@@ -213,8 +235,9 @@ def step_table(curve: dict[str, np.ndarray], runs: dict[str, Any]) -> list[str]:
     last = max((int(s[-1]) for s in reached.values() if len(s)), default=0)
     for step in range(EVERY, last + 1, EVERY):
         for key, column, title in METRICS:
-            theirs = curve[column][c_steps == step] if column in curve else np.array([])
-            row = [f"{step // 1000}k", title, f"{theirs[0]:.3g}" if len(theirs) else "-"]
+            at = np.flatnonzero(c_steps == step) if column in curve else np.array([], int)
+            theirs = _pm(*(float(v[0]) for v in mean_ci(curve[column][:, at]))) if len(at) else "-"
+            row = [f"{step // 1000}k", title, theirs]
             for seeds in runs.values():
                 steps, values = by_step(seeds, key)
                 at = np.flatnonzero(steps == step)
