@@ -17,8 +17,8 @@
 #   SMOKE=1 docs/results/scripts/parity.sh         5k steps, 2 seeds, our default population
 # Re-running resumes unfinished runs and skips finished ones. Environment overrides:
 #   TRANSAM (command), PARTNERS, OUT, STEPS, SEEDS, EVAL_EVERY (episodes), EVAL_EPISODES,
-#   CURVE (the authors' curve.csv), FIGURES (output folder), OURS_EXTRA (extra flags for the
-#   run with our defaults).
+#   CURVE (the authors' curve.csv; several, space-separated, one per seed), FIGURES (output
+#   folder), OURS_EXTRA (extra flags for the run with our defaults).
 set -euo pipefail
 
 TRANSAM=${TRANSAM:-transam}
@@ -40,7 +40,7 @@ else
   FIGURES=${FIGURES:-docs/results/parity}
 fi
 CURVE=${CURVE:-../shared/reference/authors-loop/curve.csv}
-[[ -f "$CURVE" ]] || CURVE=/work/shared/reference/authors-loop/curve.csv
+[[ -f "${CURVE%% *}" ]] || CURVE=/work/shared/reference/authors-loop/curve.csv
 HERE=$(dirname "$0")
 
 train() {  # train NAME [flags...]: one run directory per variant, resumed when unfinished
@@ -64,4 +64,5 @@ if [[ -n "${EARLIER:-}" ]]; then
   runs+=("our earlier defaults (--preset 2026-11)=$OUT/earlier")
 fi
 
-python "$HERE/parity_plot.py" --curve "$CURVE" --out "$FIGURES" "${runs[@]}"
+# shellcheck disable=SC2086  # CURVE is a list of files
+python "$HERE/parity_plot.py" --curve $CURVE --out "$FIGURES" "${runs[@]}"
