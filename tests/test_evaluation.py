@@ -321,6 +321,8 @@ def test_the_demo_shows_each_shipped_run_beside_random_play_and_the_levels(
     export_run(run_dir, shipped / "other-env")
     card = json.loads((shipped / "other-env" / "card.json").read_text())
     write_json(shipped / "other-env" / "card.json", {**card, "env": "tag"})
+    liam_card = json.loads((shipped / "spread-liam" / "card.json").read_text())
+    write_json(shipped / "spread-liam" / "card.json", {**liam_card, "summary": "how it trained"})
     monkeypatch.setattr(weights, "PRETRAINED_DIR", shipped)
     monkeypatch.chdir(tmp_path)  # the outputs go to runs/pretrained/NAME
     assert weights.pretrained_names() == ["other-env", "spread-liam"]
@@ -329,6 +331,7 @@ def test_the_demo_shows_each_shipped_run_beside_random_play_and_the_levels(
     text = capsys.readouterr().out
     for row in ("spread-liam", "random agent", "landmark rule", "memoryless", "by step"):
         assert row in text, row
+    assert "spread-liam: how it trained" in text  # budgets and settings differ between runs
     res = json.loads((tmp_path / "runs/pretrained/spread-liam/eval_train.json").read_text())
     assert f"{res['return']['mean']:.4g}" in text
     trained, random = showcase.paired_random_returns("spread-liam", EPISODES)

@@ -314,6 +314,7 @@ def _print_showcase(env: str, episodes: int) -> None:
     transam.evaluation.showcase); nothing when none is shipped."""
     from transam.evaluation.final import output_dir
     from transam.evaluation.showcase import accuracy_by_step, showcase, standard_error
+    from transam.evaluation.weights import pretrained_dir, read_card
     from transam.models.base import ACC_NEWEST
 
     shown = showcase(env, episodes)
@@ -345,6 +346,10 @@ def _print_showcase(env: str, episodes: int) -> None:
         table.add_row("memoryless (own view)", "-", "-", "-", "-", f"{own:.3f}")
         table.add_row("ceiling", "-", "-", "-", "-", f"{shown.levels['action_ceiling']:.3f}")
     console.print(table)
+    for name in shown.runs:  # how each was trained: budgets and settings differ
+        summary = read_card(pretrained_dir(name)).get("summary")
+        if summary:
+            console.print(f"[bold]{name}[/bold]: {summary}")
     for name, res in shown.runs.items():
         curve = accuracy_by_step(res)
         if curve:
