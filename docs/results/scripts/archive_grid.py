@@ -2,11 +2,12 @@
 
 A session's machine does not keep runs/, and a medium grid takes longer than one session. This
 copies, from a grid directory (`transam reproduce --out`), grid.json, log/ and every
-*finished* run (final.json present) without checkpoints/, tb/ and figures: what `transam report`
-reads (config.json, partners.json, metrics.jsonl, final.json, eval_*.json, eval_*_pca.npz),
-a few hundred KB a run. Unfinished runs are left out (without checkpoints they could not
-resume). To continue a grid on a new machine, copy the archive back and run the same
-`transam reproduce` command: finished runs are skipped, the rest train.
+*finished* run (trained, and evaluated on both populations) without checkpoints/, tb/ and
+figures: what `transam report` reads (config.json, partners.json, metrics.jsonl, final.json,
+eval_*.json, eval_*_pca.npz), a few hundred KB a run. Unfinished runs are left out (without
+checkpoints they could neither resume nor be evaluated). To continue a grid on a new machine,
+copy the archive back and run the same `transam reproduce` command: finished runs are
+skipped, the rest train.
 
     python docs/results/scripts/archive_grid.py runs/medium docs/results/medium/grid
     cp -r docs/results/medium/grid runs/medium      # on a new machine, then reproduce again
@@ -17,6 +18,8 @@ from __future__ import annotations
 import argparse
 import shutil
 from pathlib import Path
+
+from transam.rundir import EVAL_PARTNERS, evaluation_path
 
 SKIP = ("checkpoints", "tb", "*.png", "*.lock", "*.tmp")
 
@@ -32,6 +35,8 @@ def archive(src: Path, dest: Path) -> list[str]:
     copied = []
     for final in sorted(src.glob("runs/*/*/seed_*/final.json")):
         run = final.parent
+        if not all(evaluation_path(run, p).exists() for p in EVAL_PARTNERS):
+            continue  # trained, not yet evaluated: the evaluation needs the checkpoints
         rel = run.relative_to(src)
         shutil.copytree(run, dest / rel, ignore=shutil.ignore_patterns(*SKIP), dirs_exist_ok=True)
         copied.append(str(rel))
