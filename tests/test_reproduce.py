@@ -77,6 +77,33 @@ def test_rerun_redoes_nothing(smoke: Path) -> None:
         assert p.read_bytes() == data, f"{p} was rewritten"
 
 
+def test_an_archived_grid_copied_back_redoes_nothing(smoke: Path, tmp_path: Path) -> None:
+    """archive_grid keeps what the report reads of each finished run, not its checkpoints; a
+    grid rebuilt from it on a new machine trains and evaluates nothing again."""
+    archive = tmp_path / "archive"
+    copied = grid.archive_grid(smoke, archive)
+    specs = grid.grid_specs(ENVS, METHODS, SEEDS)
+    assert copied == sorted(spec.rel for spec in specs)
+    assert not list(archive.rglob("checkpoints")) and not list(archive.rglob("*.png"))
+    for spec in specs:
+        for name in ("config.json", "final.json", "metrics.jsonl", "eval_train.json"):
+            assert (archive / spec.rel / name).exists(), (spec.rel, name)
+    # A trained but unevaluated run stays out: restored without checkpoints, it could not be
+    # evaluated.
+    unevaluated = tmp_path / "unevaluated"
+    shutil.copytree(smoke, unevaluated, ignore=shutil.ignore_patterns("checkpoints", "tb"))
+    (unevaluated / specs[0].rel / "eval_heldout.json").unlink()
+    assert specs[0].rel not in grid.archive_grid(unevaluated, tmp_path / "partial")
+
+    restored = tmp_path / "restored"
+    shutil.copytree(archive, restored)
+    main(["reproduce", "--budget", "smoke", "--out", str(restored), "--jobs", "1", *GRID])
+    for spec in specs:
+        assert grid.read_launches(restored, spec) == grid.read_launches(smoke, spec)
+        assert not (restored / spec.rel / "checkpoints").exists()
+    assert (restored / "report" / "report.md").exists()
+
+
 def test_a_run_with_a_corrupt_newest_checkpoint_resumes_from_the_previous_one(
     smoke: Path, tmp_path: Path
 ) -> None:

@@ -178,6 +178,40 @@ def run_one(out: str | Path, spec: RunSpec, budget: Budget) -> dict[str, Any]:
     return {"run": spec.rel, "trained": not finished, "evaluated": evaluated}
 
 
+ARCHIVE_SKIP = ("checkpoints", "tb", "*.png", "*.lock", "*.tmp")
+"""What :func:`archive_grid` leaves out of a run: what training and the figures need, not the
+report."""
+
+
+def archive_grid(out: str | Path, dest: str | Path) -> list[str]:
+    """Copy grid.json, log/ and every finished run (trained, and evaluated on each of
+    EVAL_PARTNERS) of the grid in ``out`` into ``dest`` without checkpoints, TensorBoard files
+    and figures: what the report reads, a few hundred KB a run, so that a study that takes
+    several sessions outlives a machine that does not keep runs/. Copied back, :func:`run_one`
+    skips those runs. Unfinished runs are left out: without their checkpoints they could
+    neither resume nor be evaluated. Returns the runs copied (relative paths)."""
+    import shutil
+
+    from transam.rundir import EVAL_PARTNERS, evaluation_path
+
+    out, dest = Path(out), Path(dest)
+    if not (out / "grid.json").exists():
+        raise ConfigError(f"{str(out)!r} holds no grid.json: pass a `transam reproduce --out`")
+    dest.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(out / "grid.json", dest / "grid.json")
+    if (out / "log").is_dir():
+        shutil.copytree(out / "log", dest / "log", dirs_exist_ok=True)
+    copied = []
+    for final in sorted(out.glob("runs/*/*/seed_*/final.json")):
+        run = final.parent
+        if all(evaluation_path(run, p).exists() for p in EVAL_PARTNERS):
+            rel = run.relative_to(out)
+            skip = shutil.ignore_patterns(*ARCHIVE_SKIP)
+            shutil.copytree(run, dest / rel, ignore=skip, dirs_exist_ok=True)
+            copied.append(str(rel))
+    return copied
+
+
 # ---------------------------------------------------------------- the grid file
 
 
