@@ -3,7 +3,7 @@
 A session's machine does not keep runs/, and a medium grid takes longer than one session.
 This copies grid.json, log/ and every finished run (trained, and evaluated on both
 populations) of a grid directory without checkpoints, TensorBoard files and figures: what
-`transam report` reads, a few hundred KB a run (`transam.reproduce.grid.archive_grid`). To
+`transam report` reads, about 60 KB a run (`transam.reproduce.grid.archive_grid`). To
 continue the grid on a new machine, copy the archive back and run the same
 `transam reproduce` command: finished runs are skipped, the rest train.
 

@@ -5,8 +5,8 @@
 # the same loop with their action-loss bug fixed; since 2026-12-02 with the policy clock too),
 # against the authors' Spread population, 3 vmapped seeds each, 625k steps (the defaults run
 # anneals over 10M steps like the preset: it is the first 625k steps of a default 10M run),
-# an evaluation every 25k steps (1000 episodes'
-# worth) on 100 episodes; then the figure of both against the authors' measured curve (CURVE:
+# an evaluation every 25k steps (1000 episodes' worth) on 100 episodes; then the figure of
+# both against the authors' measured curve (CURVE:
 # not part of the repository, see docs/results/parity/README.md) in docs/results/parity/.
 # Set EARLIER=1 to add a run with our earlier defaults (--preset 2026-11).
 #

@@ -186,7 +186,7 @@ report."""
 def archive_grid(out: str | Path, dest: str | Path) -> list[str]:
     """Copy grid.json, log/ and every finished run (trained, and evaluated on each of
     EVAL_PARTNERS) of the grid in ``out`` into ``dest`` without checkpoints, TensorBoard files
-    and figures: what the report reads, a few hundred KB a run, so that a study that takes
+    and figures: what the report reads, about 60 KB a run, so that a study that takes
     several sessions outlives a machine that does not keep runs/. Copied back, :func:`run_one`
     skips those runs. Unfinished runs are left out: without their checkpoints they could
     neither resume nor be evaluated. Returns the runs copied (relative paths)."""
