@@ -2,8 +2,8 @@
 update), the FLOP rate it achieves, and this machine's matmul FLOP rate for comparison.
 
     python benchmarks/train_throughput.py [--envs spread tag ...] [--method nam|transam]
-        [--attention window stream] [--z-pass shared separate] [--updates 100] [--repeats 5]
-        [--seeds 4]
+        [--attention window stream] [--z-pass shared separate] [--masks default flax packed]
+        [--updates 100] [--repeats 5] [--seeds 4]
 
 Each environment runs the default training configuration (``TrainConfig``) for a chunk of
 ``--updates`` updates, compiled ahead of time; the median of ``--repeats`` timed chunks is
@@ -14,7 +14,10 @@ The ratio compares the achieved rate to a large float32 matmul timed in the same
 
 ``--attention window stream`` (TransAM only) times the window model and the streaming one
 (``model.attention``) side by side and prints the ratio of their env-steps/s; ``--z-pass
-shared separate`` does the same for where the policy loss's z comes from (``a2c.z_pass``).
+shared separate`` does the same for where the policy loss's z comes from (``a2c.z_pass``),
+``--masks default flax packed`` for how dropout masks are drawn (``model.dropout_masks``).
+Variants are compiled first, then timed in turn (one chunk each per round), and each ratio is
+the median of the rounds' ratios: a neighbour that slows one round slows every variant in it.
 
 ``--seeds n`` also times n seeds vmapped in one program against the single-seed program (which
 is what running the seeds one after another costs per step).
@@ -136,8 +139,28 @@ class Result:
     compile_s: float
 
 
-def time_training(config: TrainConfig, updates: int, repeats: int, seeds: int = 1) -> Result:
-    """Median env-steps/s (summed over envs and seeds) of a compiled chunk of ``updates``."""
+@dataclass
+class Prepared:
+    """A compiled training chunk, warmed up, ready to time."""
+
+    run: Callable[[], Any]
+    steps: int
+    flops: float
+    matmul_flops: float
+    compile_s: float
+
+    def result(self, seconds: float) -> Result:
+        return Result(
+            self.steps / seconds,
+            self.flops / 1e9,
+            self.matmul_flops / max(self.flops, 1.0),
+            self.flops / seconds / 1e9,
+            self.compile_s,
+        )
+
+
+def prepare(config: TrainConfig, updates: int, seeds: int = 1) -> Prepared:
+    """Compile and warm up a chunk of ``updates`` (``seeds`` vmapped seeds)."""
     env, model = env_and_model(config)
     chunk = make_chunk(config, env, model, updates)
 
@@ -157,15 +180,30 @@ def time_training(config: TrainConfig, updates: int, repeats: int, seeds: int = 
     flops, mm = count_flops(jax.make_jaxpr(chunk)(state))
     holder = [jax.block_until_ready(compiled(state)[0])]  # warm-up
 
-    def step() -> Any:
+    def run() -> Any:
         holder[0] = compiled(holder[0])[0]
         return holder[0]
 
-    seconds = median_seconds(step, repeats)
     steps = updates * config.a2c.num_envs * config.a2c.n_steps * seeds
-    return Result(
-        steps / seconds, flops / 1e9, mm / max(flops, 1.0), flops / seconds / 1e9, compile_s
-    )
+    return Prepared(run, steps, flops, mm, compile_s)
+
+
+def interleaved_seconds(runs: list[Callable[[], Any]], repeats: int) -> list[list[float]]:
+    """Seconds of each of ``runs``, timed in turn ``repeats`` times (round r times every run
+    once), so that a noisy neighbour slows all of them alike: ratios are taken per round."""
+    times: list[list[float]] = [[] for _ in runs]
+    for _ in range(repeats):
+        for fn, out in zip(runs, times, strict=True):
+            tic = time.perf_counter()
+            jax.block_until_ready(fn())
+            out.append(time.perf_counter() - tic)
+    return times
+
+
+def time_training(config: TrainConfig, updates: int, repeats: int, seeds: int = 1) -> Result:
+    """Median env-steps/s (summed over envs and seeds) of a compiled chunk of ``updates``."""
+    prepared = prepare(config, updates, seeds)
+    return prepared.result(median_seconds(prepared.run, repeats))
 
 
 @dataclass
@@ -185,6 +223,9 @@ class Args:
     """TransAM's attention(s) to time (``model.attention``); two: side by side, with the ratio"""
     z_pass: tuple[Literal["shared", "separate"], ...] = ("shared",)
     """the policy loss's z pass(es) to time (``a2c.z_pass``); two: side by side, with the ratio"""
+    masks: tuple[Literal["default", "flax", "packed"], ...] = ("default",)
+    """TransAM's dropout masks to time (``model.dropout_masks``; 'default': each attention's
+    own, flax's for the window model and packed for the streaming one)"""
     updates: int = 100
     """updates per timed chunk"""
     repeats: int = 5
@@ -193,35 +234,46 @@ class Args:
     """also compare n vmapped seeds with one seed (0: skip)"""
 
 
-def config(env: str, method: str, attention: str, z_pass: str = "shared") -> TrainConfig:
-    """The default training configuration with the given attention and z pass."""
-    model = replace(TransAMConfig(), attention=attention)  # type: ignore[arg-type]
+def config(
+    env: str, method: str, attention: str, z_pass: str = "shared", masks: str = "default"
+) -> TrainConfig:
+    """The default training configuration with the given attention, z pass and masks."""
+    dropout_masks = None if masks == "default" else masks
+    model = replace(TransAMConfig(), attention=attention, dropout_masks=dropout_masks)  # type: ignore[arg-type]
     a2c = replace(TrainConfig().a2c, z_pass=z_pass)  # type: ignore[arg-type]
     return TrainConfig(env=env, method=method, model=model, a2c=a2c)  # type: ignore[arg-type]
 
 
 def main(args: Args) -> None:
-    if args.method != "transam" and (args.attention, args.z_pass) != (("window",), ("shared",)):
-        raise SystemExit("--attention and --z-pass apply to --method transam")
-    variants = [f"{a}/{z}" for a in args.attention for z in args.z_pass]
+    settings = (args.attention, args.z_pass, args.masks)
+    if args.method != "transam" and settings != (("window",), ("shared",), ("default",)):
+        raise SystemExit("--attention, --z-pass and --masks apply to --method transam")
+    variants = [f"{a}/{z}/{m}" for a in args.attention for z in args.z_pass for m in args.masks]
     enable_compilation_cache()
-    console = Console()
+    console = Console(width=160)  # wide tables stay readable in a log
     peak = matmul_gflops()
     table = Table(
         title=f"full A2C training, method {args.method}, default config, {args.updates} updates "
-        f"x {args.repeats} repeats, {jax.devices()[0].platform}"
+        f"x {args.repeats} repeats (variants timed in turn), {jax.devices()[0].platform}"
     )
-    cols = ("env", "attention/z pass", "steps/s", "GFLOP/chunk", "matmul share", "GFLOP/s")
+    cols = ("env", "attention/z pass/masks", "steps/s", "GFLOP/chunk", "matmul share", "GFLOP/s")
     for col in (*cols, "matmul GFLOP/s"):
         table.add_column(col, justify="right")
     table.add_column("ratio", justify="right")
     rates: dict[tuple[str, str], float] = {}
+    ratios: dict[tuple[str, str], float] = {}
     for name in args.envs:
-        for variant in variants:
-            attention, z_pass = variant.split("/")
-            cfg = config(name, args.method, attention, z_pass)
-            r = time_training(cfg, args.updates, args.repeats)
+        prepared = [
+            prepare(config(name, args.method, *v.split("/")), args.updates) for v in variants
+        ]
+        times = interleaved_seconds([p.run for p in prepared], args.repeats)
+        for variant, p, t in zip(variants, prepared, times, strict=True):
+            r = p.result(statistics.median(t))
             rates[name, variant] = r.steps_per_s
+            # Paired: each round's ratio against the first variant, then their median.
+            ratios[name, variant] = statistics.median(
+                a / b for a, b in zip(times[0], t, strict=True)
+            )
             table.add_row(
                 name,
                 variant if args.method == "transam" else "-",
@@ -235,7 +287,10 @@ def main(args: Args) -> None:
     console.print(table)
     if len(variants) > 1:
         first, *others = variants
-        side = Table(title=f"env-steps/s by attention/z pass (ratio: against {first})")
+        side = Table(
+            title=f"env-steps/s by attention/z pass/masks (ratio against {first}: median of "
+            "the rounds' ratios)"
+        )
         side.add_column("env", justify="right")
         for variant in variants:
             side.add_column(f"{variant} steps/s", justify="right")
@@ -245,7 +300,7 @@ def main(args: Args) -> None:
             side.add_row(
                 name,
                 *(f"{rates[name, v]:,.0f}" for v in variants),
-                *(f"{rates[name, v] / rates[name, first]:.2f}x" for v in others),
+                *(f"{ratios[name, v]:.2f}x" for v in others),
             )
         console.print(side)
     if args.seeds > 1:
@@ -253,7 +308,7 @@ def main(args: Args) -> None:
         for col in ("env", "vmap steps/s", "sequential steps/s", "vmap speed-up"):
             seeds.add_column(col, justify="right")
         for name in args.envs:
-            cfg = config(name, args.method, args.attention[0], args.z_pass[0])
+            cfg = config(name, args.method, args.attention[0], args.z_pass[0], args.masks[0])
             one = time_training(cfg, args.updates, args.repeats)
             many = time_training(cfg, args.updates, args.repeats, seeds=args.seeds)
             seeds.add_row(

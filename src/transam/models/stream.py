@@ -41,6 +41,7 @@ from flax import struct
 
 from transam.envs.core import GameSpec, PartnerRecord
 from transam.models.base import ACC_ALL, MSE_ALL, Decoded, LocalStep, Params, position_metrics
+from transam.models.dropout import dropout
 from transam.models.transam import (
     TransAM,
     TransAMConfig,
@@ -100,7 +101,7 @@ class _StreamBlock(nn.Module):
             values = jnp.concatenate([jax.lax.stop_gradient(mem_value), new["value"]])
             logits = jnp.einsum("shd,jhd->hsj", q * head_dim**-0.5, keys)
             logits = jnp.where(mask[None], logits, jnp.finfo(logits.dtype).min)
-            weights = nn.Dropout(cfg.dropout, deterministic=self.deterministic)(
+            weights = dropout(cfg.dropout, self.deterministic, cfg.masks)(
                 jax.nn.softmax(logits, axis=-1)
             )
             out = jnp.einsum("hsj,jhd->shd", weights, values)

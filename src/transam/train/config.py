@@ -277,6 +277,8 @@ class TrainConfig:
         _choice("model.attention", m.attention, ("window", "stream"))
         if m.memory is not None:
             _at_least("model.memory", m.memory, 1)
+        if m.dropout_masks is not None:
+            _choice("model.dropout_masks", m.dropout_masks, ("flax", "packed"))
         stream = _methods_with("stream")
         if m.attention == "stream" and self.method not in stream:
             raise ConfigError(
@@ -319,11 +321,13 @@ ADDED_SETTINGS: dict[tuple[str, str], Any] = {
     ("model", "action_loss"): "ce",
     ("model", "attention"): "window",
     ("model", "memory"): None,
+    ("model", "dropout_masks"): "flax",
 }
 """Settings added after runs were first written, with the value that reproduces those runs."""
-PRESET_FREE = (("model", "attention"), ("model", "memory"))
+PRESET_FREE = (("model", "attention"), ("model", "memory"), ("model", "dropout_masks"))
 """Added settings that the authors' preset leaves at their defaults (the streaming encoder
-is not part of the authors' loop; every other added setting is one of the preset's)."""
+and its masks are not part of the authors' loop; every other added setting is one of the
+preset's)."""
 
 
 def with_added_settings(saved: dict[str, Any]) -> dict[str, Any]:
