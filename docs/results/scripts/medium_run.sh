@@ -5,6 +5,10 @@
 # the side runs set beside the grid. Resumable: run it again.
 #   medium_run.sh OUT "train heldout" --method transam --seed 0 [more `transam train` args]
 set -euo pipefail
+if [ $# -lt 2 ]; then
+  echo "usage: $0 OUT PARTNERS [transam train args]; PARTNERS: 'train', 'heldout' or both" >&2
+  exit 2
+fi
 out=$1 partners=$2
 shift 2
 cd "$(git -C "$(dirname "$0")" rev-parse --show-toplevel)"
