@@ -86,6 +86,11 @@ def test_memoryless_level_of_constructed_populations() -> None:
     # one, so the same rule is readable from it too (a sum of two inputs).
     own = memoryless_accuracy(steps, 5, cfg, view="own")
     assert own["accuracy"] > 0.85 and own["majority"] == got["majority"]
+    # Per step: one value per timestep; every episode runs to the time limit, so each step
+    # holds the same test samples and the steps' mean is the pooled accuracy.
+    assert len(own["by_step"]) == env.spec.episode_len
+    assert np.mean(own["by_step"]) == pytest.approx(own["accuracy"], abs=1e-9)
+    assert np.median(own["by_step"]) > 0.8  # 16 test samples a step: single steps vary
     with pytest.raises(ValueError, match="unknown view 'theirs'; valid choices: partner, own"):
         memoryless_accuracy(steps, 5, cfg, view="theirs")
     # A member that ignores its observation and acts uniformly: about 1/5.

@@ -442,6 +442,64 @@ def test_partial_grid_reports_what_exists_and_lists_what_is_missing(tmp_path: Pa
     assert v["returns-vs-oracle"] == "not run"  # no Oracle
 
 
+def _spread_levels(monkeypatch: pytest.MonkeyPatch, by_step: list[float | None]) -> None:
+    """Spread's shipped manifest replaced by one recording ``by_step`` as its per-step level."""
+    from transam.partners import learned
+
+    found = {
+        "action_ceiling": 1.0,
+        "memoryless_accuracy": 0.5,
+        "majority_rate": 0.2,
+        "memoryless_own_accuracy": 0.4,
+        "memoryless_own_accuracy_by_step": by_step,
+        "population_digest": "abc",
+    }
+
+    def load(env: str, root: object = None) -> dict:
+        if env != "spread":
+            raise FileNotFoundError(env)
+        return {"default": {"diversity": found}}
+
+    monkeypatch.setattr(learned, "load_manifest", load)
+
+
+@pytest.mark.parametrize(
+    ("level", "verdict"),
+    [
+        (np.linspace(0.9, 0.2, EPISODE), "holds"),  # the level falls: the gain grows
+        (np.linspace(0.0, 0.9, EPISODE), "does not hold"),  # it rises faster than accuracy
+    ],
+)
+def test_accuracy_gain_is_read_over_the_per_step_memoryless_level(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, level: np.ndarray, verdict: str
+) -> None:
+    _spread_levels(monkeypatch, [*level[:-1].tolist(), None])
+    write_grid(tmp_path, GOOD_RET, GOOD_ACC, envs=("spread",), methods=("transam",))
+    build_report(tmp_path, draw=True)
+    results = json.loads((tmp_path / "report" / "results.json").read_text())
+    claims = {c["key"]: c for c in results["claims"]}
+    # the raw accuracy rises by 0.3 from the first to the last valued step either way
+    assert claims["episode-evolution"]["per_env"]["spread"]["verdict"] == "holds"
+    gain = results["cells"]["spread"]["transam"]["metrics"]["trend:accuracy_gain"]
+    assert gain["mean"] == pytest.approx(0.3 - (level[-2] - level[0]), abs=0.05)
+    assert claims["episode-evolution-gain"]["per_env"]["spread"]["verdict"] == verdict
+    assert results["partner_levels"]["spread"]["memoryless_own_accuracy_by_step"][0] == level[0]
+    assert (tmp_path / "report" / "figures" / "transam_episode.png").exists()
+
+
+def test_levels_follow_the_grids_partners(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The per-step level of the default population is not applied to other partners."""
+    _spread_levels(monkeypatch, [0.5] * EPISODE)
+    write_grid(tmp_path, GOOD_RET, GOOD_ACC, envs=("spread",), methods=("transam",))
+    grid = json.loads((tmp_path / "grid.json").read_text())
+    (tmp_path / "grid.json").write_text(json.dumps({**grid, "partners": "heuristic"}))
+    results = json.loads(build_report(tmp_path, draw=False).with_name("results.json").read_text())
+    assert results["partner_levels"] == {"spread": None}
+    assert "trend:accuracy_gain" not in results["cells"]["spread"]["transam"]["metrics"]
+    gain = {c["key"]: c for c in results["claims"]}["episode-evolution-gain"]
+    assert gain["per_env"]["spread"]["verdict"] == "not run"
+
+
 def test_report_tables_match_results_json(good: tuple[Path, dict[str, Any], str]) -> None:
     _, results, md = good
     usual = results["usual_seeds"]

@@ -103,6 +103,15 @@ def fit_accuracy(
     """Held-out top-1 accuracy of a 2-layer MLP (``test``: the held-out samples; default every
     4th sample)."""
     test = np.arange(len(y)) % 4 == 0 if test is None else np.asarray(test, bool)
+    return float(np.mean(fit_hits(x, y, classes, cfg, test)))
+
+
+def fit_hits(
+    x: np.ndarray, y: np.ndarray, classes: int, cfg: ClassifierConfig, test: np.ndarray
+) -> np.ndarray:
+    """Whether a 2-layer MLP trained on the samples outside ``test`` predicts each ``test``
+    sample right (bool, in order): :func:`fit_accuracy` per sample, for per-step levels."""
+    test = np.asarray(test, bool)
     mean, std = x[~test].mean(0), x[~test].std(0) + 1e-6
     xs = (x - mean) / std
     net = Classifier(cfg.hidden, classes)
@@ -128,7 +137,7 @@ def fit_accuracy(
 
     params = train(jax.random.PRNGKey(cfg.seed))
     pred = np.asarray(jnp.argmax(apply(net, params, jnp.asarray(xs[test])), -1))
-    return float(np.mean(pred == y[test]))
+    return pred == y[test]
 
 
 def partner_id_accuracy(env: ControlledEnv, cfg: ClassifierConfig | None = None) -> dict:
@@ -298,12 +307,14 @@ def action_ceiling(
 
 def memoryless_accuracy(
     steps: PartnerSteps, num_actions: int, cfg: LevelsConfig | None = None, view: str = "partner"
-) -> dict[str, float]:
+) -> dict[str, Any]:
     """{"accuracy": held-out accuracy of an MLP on (observation, slot one-hot) -> partner
-    action pooled over all teams, "majority": each slot's most frequent training action scored
-    on the test samples}; every 4th episode of each team is test. ``view``: ``"partner"`` reads
-    the partner's own observation; ``"own"`` the controlled agent's current observation (what
-    an agent model has at one step, without its history: the level it must beat)."""
+    action pooled over all teams, "by_step": the same per timestep of the episode (None where
+    no test episode runs), "majority": each slot's most frequent training action scored on the
+    test samples}; every 4th episode of each team is test. ``view``: ``"partner"`` reads the
+    partner's own observation; ``"own"`` the controlled agent's current observation (what an
+    agent model has at one step, without its history: the level it must beat, and, by step,
+    the level its accuracy within the episode is read against: early steps are easier)."""
     cfg = cfg or LevelsConfig()
     e, t, n, _ = steps.obs.shape
     slot = np.broadcast_to(np.eye(n, dtype=np.float32), (e, t, n, n))
@@ -317,7 +328,8 @@ def memoryless_accuracy(
     test = np.broadcast_to((steps.episode % 4 == 0)[:, None, None], (e, t, n))
     live = np.broadcast_to(steps.live[..., None], (e, t, n))
     slots = np.broadcast_to(np.arange(n), (e, t, n))
-    x, y, test, slots = x[live], steps.actions[live], test[live], slots[live]
+    times = np.broadcast_to(np.arange(t)[None, :, None], (e, t, n))
+    x, y, test, slots, times = x[live], steps.actions[live], test[live], slots[live], times[live]
     if test.all() or not test.any():
         raise ValueError("memoryless_accuracy needs at least 2 episodes per team (train and test)")
     hits = 0
@@ -326,8 +338,12 @@ def memoryless_accuracy(
         top = np.bincount(train_j, minlength=num_actions).argmax()
         hits += int(np.sum(y[(slots == j) & test] == top))
     mlp = ClassifierConfig(hidden=cfg.hidden, train_steps=cfg.train_steps, lr=cfg.lr, seed=cfg.seed)
+    right = fit_hits(x, y, num_actions, mlp, test)
+    at = times[test]
+    by_step = [float(right[at == i].mean()) if np.any(at == i) else None for i in range(t)]
     return {
-        "accuracy": fit_accuracy(x, y, num_actions, mlp, test),
+        "accuracy": float(np.mean(right)),
+        "by_step": by_step,
         "majority": hits / int(test.sum()),
     }
 
@@ -335,7 +351,8 @@ def memoryless_accuracy(
 def action_levels(env: ControlledEnv, cfg: LevelsConfig | None = None) -> dict[str, Any]:
     """The ceiling and the memoryless levels of ``env``'s population (module docstring):
     {"ceiling", "members", "sampled", "memoryless" (from the partner's own observation),
-    "memoryless_own" (from the controlled agent's current observation), "majority", "steps"}."""
+    "memoryless_own" (from the controlled agent's current observation), "memoryless_own_by_step"
+    (the same per timestep), "majority", "steps"}."""
     cfg = cfg or LevelsConfig()
     steps = collect_partner_steps(env, cfg.episodes_per_team, cfg.seed)
     num_actions = env.spec.other_num_actions
@@ -346,6 +363,7 @@ def action_levels(env: ControlledEnv, cfg: LevelsConfig | None = None) -> dict[s
         **ceiling,
         "memoryless": memoryless["accuracy"],
         "memoryless_own": own["accuracy"],
+        "memoryless_own_by_step": own["by_step"],
         "majority": memoryless["majority"],
         "steps": int(steps.live.sum()) * steps.obs.shape[2],
     }
@@ -373,6 +391,9 @@ def diversity_record(
         "action_ceiling": round(levels["ceiling"], 4),
         "memoryless_accuracy": round(levels["memoryless"], 4),
         "memoryless_own_accuracy": round(levels["memoryless_own"], 4),
+        "memoryless_own_accuracy_by_step": [
+            None if v is None else round(v, 4) for v in levels["memoryless_own_by_step"]
+        ],
         "majority_rate": round(levels["majority"], 4),
         "member_ceilings": {n: round(v, 4) for n, v in levels["members"].items()},
         "ceiling_sampled": levels["sampled"],

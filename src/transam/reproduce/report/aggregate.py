@@ -19,12 +19,15 @@ FINAL_METRICS = (
     "heldout_return",
     "probe_accuracy",
     f"trend:{ACC_NEWEST}",
+    "trend:accuracy_gain",
     "trend:obs_mse",
 )
 CURVE_METRICS = ("return", ACC_NEWEST, "obs_mse")
 """Curves of the evaluations during training (``eval/`` in metrics.jsonl)."""
 TRAIN_CURVE_METRICS = (ACC_NEWEST, ACC_ALL)
 """Curves of the training batches' metrics (``train/``; the authors chart all-positions)."""
+MEMORYLESS_BY_STEP = "memoryless_own_accuracy_by_step"
+"""The recorded level (``transam partners diversity --record``) the accuracy gain is read over."""
 PER_STEP_METRICS = ("cum_return", ACC_NEWEST, ACC_ALL, "obs_mse")
 SOURCE_EVAL = "final evaluation"
 SOURCE_TRAIN = "last training evaluation"
@@ -61,10 +64,15 @@ def _trend(curve: np.ndarray) -> float | None:
     return float(values[-q:].mean() - values[:q].mean())
 
 
-def run_finals(run: RunData) -> dict[str, tuple[float, str]]:
+def run_finals(
+    run: RunData, level_by_step: list[float | None] | None = None
+) -> dict[str, tuple[float, str]]:
     """The final metrics of a finished run: metric -> (value, source). The final evaluation
     (eval_train.json) is preferred; the last training evaluation (final.json) stands in for a
-    run not evaluated yet."""
+    run not evaluated yet. ``level_by_step``: the population's memoryless own-view accuracy
+    per timestep; with it, ``trend:accuracy_gain`` is the trend of the newest-position
+    accuracy above that level (the level itself falls through the episode: early steps are
+    easier to predict without history)."""
     out: dict[str, tuple[float, str]] = {}
     if run.status != "finished":
         return out
@@ -86,6 +94,11 @@ def run_finals(run: RunData) -> dict[str, tuple[float, str]]:
         curve = _series(per_step.get(metric))
         if curve is not None and (trend := _trend(curve)) is not None:
             out[f"trend:{metric}"] = (trend, SOURCE_EVAL)
+    curve, level = _series(per_step.get(ACC_NEWEST)), _series(level_by_step)
+    if curve is not None and level is not None:
+        n = min(len(curve), len(level))
+        if (trend := _trend(curve[:n] - level[:n])) is not None:
+            out["trend:accuracy_gain"] = (trend, SOURCE_EVAL)
     return out
 
 
@@ -130,8 +143,9 @@ def _episode_curve(curves: list[np.ndarray]) -> dict[str, Any]:
     return {"t": list(range(length)), **curve_ci(matrix)}
 
 
-def cell(runs: list[RunData]) -> dict[str, Any]:
-    """Everything the report shows for one (env, method), from its runs."""
+def cell(runs: list[RunData], level_by_step: list[float | None] | None = None) -> dict[str, Any]:
+    """Everything the report shows for one (env, method), from its runs (``level_by_step``:
+    see :func:`run_finals`)."""
     finished = [r for r in runs if r.status == "finished"]
     out: dict[str, Any] = {
         "seeds": [r.seed for r in finished],
@@ -140,7 +154,7 @@ def cell(runs: list[RunData]) -> dict[str, Any]:
         "seeds_not_evaluated": [r.seed for r in finished if "train" not in r.evals],
         "metrics": {},
     }
-    finals = [(r.seed, run_finals(r)) for r in finished]
+    finals = [(r.seed, run_finals(r, level_by_step)) for r in finished]
     for metric in FINAL_METRICS:
         have = [(seed, f[metric]) for seed, f in finals if metric in f]
         if have:
@@ -190,14 +204,20 @@ def cell(runs: list[RunData]) -> dict[str, Any]:
     return out
 
 
-def cells(grid: Grid) -> dict[str, dict[str, dict[str, Any]]]:
-    """env -> method -> cell, in the paper's order."""
+def cells(
+    grid: Grid, levels: dict[str, dict[str, Any] | None] | None = None
+) -> dict[str, dict[str, dict[str, Any]]]:
+    """env -> method -> cell, in the paper's order. ``levels``: the partners' recorded levels
+    per env (:func:`~transam.reproduce.report.results.partner_levels`), for the per-step
+    memoryless level."""
+    levels = levels or {}
     groups: dict[tuple[str, str], list[RunData]] = {}
     for run in grid.runs:
         groups.setdefault((run.env, run.method), []).append(run)
     out: dict[str, dict[str, dict[str, Any]]] = {}
     for (env, method), runs in groups.items():
-        out.setdefault(env, {})[method] = cell(runs)
+        by_step = (levels.get(env) or {}).get(MEMORYLESS_BY_STEP)
+        out.setdefault(env, {})[method] = cell(runs, by_step)
     envs, methods = order_key(ENV_ORDER), order_key(METHOD_ORDER)
     return {e: {m: out[e][m] for m in sorted(out[e], key=methods)} for e in sorted(out, key=envs)}
 

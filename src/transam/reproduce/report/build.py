@@ -16,7 +16,7 @@ from transam.reproduce.report import aggregate
 from transam.reproduce.report.aggregate import ACC_NEWEST
 from transam.reproduce.report.load import load_grid
 from transam.reproduce.report.markdown import render
-from transam.reproduce.report.results import FIGURES, build_results, marl_eval
+from transam.reproduce.report.results import FIGURES, build_results, grid_levels, marl_eval
 from transam.rundir import write_atomic, write_json
 
 
@@ -27,7 +27,8 @@ def build_report(out: Path, draw: bool = True) -> Path:
 
     out = Path(out)
     grid = load_grid(out)
-    table = aggregate.cells(grid)
+    levels = grid_levels(grid)
+    table = aggregate.cells(grid, levels)
     report_dir = out / "report"
     fig_dir = report_dir / "figures"
     drawn: dict[str, str] = {}
@@ -42,7 +43,7 @@ def build_report(out: Path, draw: bool = True) -> Path:
             "Action reconstruction accuracy during training",
             p,
         ),
-        "episode": lambda p: figures.episode_evolution(table, "transam", p),
+        "episode": lambda p: figures.episode_evolution(table, "transam", p, levels),
         "probe": lambda p: figures.probe_curves(table, p),
         "pca": lambda p: figures.pca_scatter(grid.runs, "transam", p),
     }
@@ -52,7 +53,7 @@ def build_report(out: Path, draw: bool = True) -> Path:
             drawn[key] = f"figures/{FIGURES[key]}"
         else:
             path.unlink(missing_ok=True)  # not drawn: no stale figure from an earlier build
-    results = build_results(grid, table, drawn)
+    results = build_results(grid, table, drawn, levels)
     report_dir.mkdir(parents=True, exist_ok=True)
     write_json(report_dir / "results.json", results)
     write_json(report_dir / "marl_eval.json", marl_eval(grid))

@@ -17,6 +17,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from transam.registry import display, env_title, method_entry, method_names
+from transam.reproduce.report.aggregate import ACC_NEWEST, MEMORYLESS_BY_STEP
 from transam.reproduce.report.load import METHOD_ORDER, RunData
 from transam.rundir import write_atomic
 
@@ -116,14 +117,20 @@ def training_curves(
 
 EPISODE_ROWS = (
     ("cum_return", "cumulative reward ↑"),
-    ("action_accuracy_newest", "action accuracy (newest position) ↑"),
+    (ACC_NEWEST, "action accuracy (newest position) ↑"),
     ("obs_mse", "observation MSE ↓"),
 )
 
 
-def episode_evolution(table: dict[str, dict[str, Any]], method: str, path: Path) -> Path | None:
+def episode_evolution(
+    table: dict[str, dict[str, Any]],
+    method: str,
+    path: Path,
+    levels: dict[str, dict[str, Any] | None] | None = None,
+) -> Path | None:
     """Fig. 5: one method's cumulative reward, action accuracy and observation MSE vs the
-    timestep within the episode (final evaluation), CI across seeds."""
+    timestep within the episode (final evaluation), CI across seeds; the accuracy panel also
+    shows the population's per-step memoryless level where ``levels`` records one."""
     import matplotlib as mpl
 
     envs = [e for e, cells in table.items() if cells.get(method, {}).get("per_step")]
@@ -143,6 +150,11 @@ def episode_evolution(table: dict[str, dict[str, Any]], method: str, path: Path)
                 ax = axes[i, j]
                 if key in per_step:
                     _band(ax, per_step[key]["t"], per_step[key], display(method), **style)
+                    level = ((levels or {}).get(env) or {}).get(MEMORYLESS_BY_STEP)
+                    if key == ACC_NEWEST and level:
+                        y = [np.nan if v is None else v for v in level]
+                        ax.plot(range(len(y)), y, color="black", linestyle=":", label="memoryless")
+                        ax.legend(loc="best", fontsize="small")
                 else:
                     ax.text(
                         0.5,

@@ -21,7 +21,7 @@ METRIC_TITLE = {
     "probe_accuracy": "probe accuracy (%)",
     "obs_mse": "observation MSE",
 }
-PERCENT = (ACC_NEWEST, ACC_ALL, "probe_accuracy", f"trend:{ACC_NEWEST}")
+PERCENT = (ACC_NEWEST, ACC_ALL, "probe_accuracy", f"trend:{ACC_NEWEST}", "trend:accuracy_gain")
 ACCURACY_NOTE = (
     "Two accuracies. *Newest position*: the decoder on the embedding the policy acted on, "
     "against the partners' actual actions at that step (the authors' code logs this one in "

@@ -74,7 +74,13 @@ def partner_levels(envs: list[str], split: str = "default") -> dict[str, dict[st
         except (FileNotFoundError, KeyError, ValueError):
             found = {}
         ok = all(isinstance(found.get(k), int | float) for k in LEVEL_KEYS)
-        keep = (*LEVEL_KEYS, "memoryless_own_accuracy", "population_digest", "measured_by")
+        keep = (
+            *LEVEL_KEYS,
+            "memoryless_own_accuracy",
+            aggregate.MEMORYLESS_BY_STEP,
+            "population_digest",
+            "measured_by",
+        )
         out[env] = {k: found.get(k) for k in keep} if ok else None
     return out
 
@@ -151,8 +157,25 @@ def marl_eval(grid: Grid) -> dict[str, Any]:
     return data
 
 
-def build_results(grid: Grid, table: Table, figures: dict[str, str]) -> dict[str, Any]:
-    """results.json of ``grid`` (aggregated into ``table``), naming the ``figures`` drawn."""
+def grid_levels(grid: Grid) -> dict[str, dict[str, Any] | None]:
+    """The recorded levels of the population each env of ``grid`` trained against (None for
+    partners without a manifest entry: the scripted or the authors' populations)."""
+    envs = sorted({r.env for r in grid.runs})
+    split = grid.info.get("partners", "default")
+    if split not in ("default", "heldout"):
+        return {e: None for e in envs}
+    return partner_levels(envs, split)
+
+
+def build_results(
+    grid: Grid,
+    table: Table,
+    figures: dict[str, str],
+    levels: dict[str, dict[str, Any] | None] | None = None,
+) -> dict[str, Any]:
+    """results.json of ``grid`` (aggregated into ``table``), naming the ``figures`` drawn
+    (``levels``: :func:`grid_levels`, computed when not given)."""
+    levels = grid_levels(grid) if levels is None else levels
     return {
         "generated": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "grid": {
@@ -174,7 +197,7 @@ def build_results(grid: Grid, table: Table, figures: dict[str, str]) -> dict[str
         "usual_seeds": usual_seeds(table),
         "cells": table,
         "aggregates": aggregate.aggregates(table),
-        "partner_levels": partner_levels(list(table)),
+        "partner_levels": {env: levels.get(env) for env in table},
         "claims": claims.evaluate_claims(table),
         "figures": figures,
     }
