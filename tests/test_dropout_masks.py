@@ -5,6 +5,8 @@ flax's, masks are independent across entries and keys, the window model keeps fl
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -83,3 +85,36 @@ def test_settings_validation_and_old_runs() -> None:
     assert cli.model.masks == "packed"
     # Runs written before the setting existed drew flax's masks, streaming ones included.
     assert ADDED_SETTINGS["model", "dropout_masks"] == "flax"
+
+
+@pytest.mark.parametrize(
+    ("attention", "saved", "now", "resumes"),
+    [
+        ("window", "absent", None, True),  # a run from before the setting: flax's, as now
+        ("stream", "absent", None, False),  # it drew flax's masks; the default now packs
+        ("stream", "absent", "flax", True),  # ... and resumes when told flax
+        ("window", None, "flax", True),  # started on the default, resumed naming it
+        ("stream", None, "packed", True),
+        ("window", None, "packed", False),
+    ],
+)
+def test_resume_compares_the_masks_a_run_draws(
+    tmp_path: Path, attention: str, saved: str | None, now: str | None, resumes: bool
+) -> None:
+    """--resume (and `transam reproduce`, which resumes with the grid's settings) matches
+    masks by what the model draws, not by how the setting was spelled."""
+    from transam.rundir import RunDirError, prepare_run_dir
+
+    def config(masks: str | None) -> TrainConfig:
+        model = dataclasses.replace(TINY, attention=attention, dropout_masks=masks)  # type: ignore[arg-type]
+        return TrainConfig(model=model, out=str(tmp_path), resume=True)
+
+    written = config(None if saved == "absent" else saved).identity()
+    if saved == "absent":
+        del written["model"]["dropout_masks"]
+    (tmp_path / "config.json").write_text(json.dumps(written))
+    if resumes:
+        assert prepare_run_dir(config(now)) == "resume"
+    else:
+        with pytest.raises(RunDirError, match=r"model\.dropout_masks \(run: '(flax|packed)'"):
+            prepare_run_dir(config(now))

@@ -70,7 +70,7 @@ import msgpack
 from flax import serialization
 
 from transam.compose import partner_choices
-from transam.train.config import ConfigError, TrainConfig, with_added_settings
+from transam.train.config import ConfigError, TrainConfig, comparable, with_added_settings
 
 KEEP_CHECKPOINTS = 2
 LOCK_FILE = ".lock"
@@ -274,8 +274,8 @@ def prepare_run_dir(config: TrainConfig) -> str:
         raise RunDirError(
             f"--out {str(out)!r} holds {what}; pass{hint} --force to delete it and start over"
         )
-    saved = with_added_settings(json.loads((out / "config.json").read_text()))
-    wanted = json.loads(json.dumps(config.identity()))
+    saved = comparable(with_added_settings(json.loads((out / "config.json").read_text())))
+    wanted = comparable(json.loads(json.dumps(config.identity())))
     if saved != wanted and _extends(out, saved, wanted, config):
         _check_population(out, config)
         return "extend"

@@ -340,6 +340,20 @@ def with_added_settings(saved: dict[str, Any]) -> dict[str, Any]:
     return saved
 
 
+def comparable(identity: dict[str, Any]) -> dict[str, Any]:
+    """A run's settings (``identity()``, or a saved config.json through
+    :func:`with_added_settings`) with each default that depends on another setting resolved,
+    so that a run started on the default and a command naming the value it resolves to are the
+    same run: ``model.dropout_masks`` None is the masks the model draws (flax's for the window
+    model, packed for the streaming one)."""
+    model = identity.get("model")
+    if not isinstance(model, dict) or model.get("dropout_masks") is not None:
+        return identity
+    attention = model.get("attention", "window")
+    masks = TransAMConfig(attention=attention).masks if attention in ("window", "stream") else None
+    return {**identity, "model": {**model, "dropout_masks": masks}}
+
+
 def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
     if value not in choices:
         raise ConfigError(f"unknown {name} {value!r}; valid choices: {', '.join(choices)}")
