@@ -9,6 +9,7 @@ episode count, so their program is the one the grid compiled.
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 from typing import Any
@@ -24,6 +25,7 @@ from transam.evaluation.probe import linear_probe, pca_2d, stratified_split
 from transam.evaluation.weights import export_run
 from transam.partners import learned
 from transam.reproduce import grid
+from transam.reproduce.report.results import partner_levels
 from transam.rundir import evaluation_path, load_run_config, read_metrics, write_json
 from transam.train.config import ConfigError
 
@@ -331,6 +333,11 @@ def test_the_demo_shows_each_shipped_run_beside_random_play_and_the_levels(
     text = capsys.readouterr().out
     for row in ("spread-liam", "random agent", "landmark rule", "memoryless", "by step"):
         assert row in text, row
+    # the per-step table holds the population's per-step level under the accuracy row
+    recorded = partner_levels(["spread"])["spread"]
+    assert recorded is not None
+    level = recorded["memoryless_own_accuracy_by_step"]
+    assert re.search(rf"memoryless\s*│\s*{level[0]:.2f}\s*│", text)
     assert "spread-liam: how it trained" in text  # budgets and settings differ between runs
     res = json.loads((tmp_path / "runs/pretrained/spread-liam/eval_train.json").read_text())
     assert f"{res['return']['mean']:.4g}" in text

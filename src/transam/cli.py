@@ -350,14 +350,22 @@ def _print_showcase(env: str, episodes: int) -> None:
         summary = read_card(pretrained_dir(name)).get("summary")
         if summary:
             console.print(f"[bold]{name}[/bold]: {summary}")
+    level = (shown.levels or {}).get("memoryless_own_accuracy_by_step") or []
     for name, res in shown.runs.items():
         curve = accuracy_by_step(res)
         if curve:
-            steps = Table(title=f"{name}: partner-action accuracy by step of the episode")
+            steps = Table(
+                title=f"{name}: partner-action accuracy by step of the episode",
+                caption="memoryless: the population's recorded level at that step (random "
+                "controlled agent); early steps are easier to predict without history",
+            )
             steps.add_column("t")
             for t, _ in curve:
                 steps.add_column(str(t), justify="right")
             steps.add_row("accuracy", *(f"{a:.2f}" for _, a in curve))
+            if level:
+                at = [level[t] if t < len(level) else None for t, _ in curve]
+                steps.add_row("memoryless", *("-" if v is None else f"{v:.2f}" for v in at))
             console.print(steps)
         console.print(f"figure: {output_dir(name) / 'eval_train.png'}")
 
