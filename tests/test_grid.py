@@ -103,3 +103,31 @@ def test_reproduce_refuses_an_unknown_population_before_writing(tmp_path) -> Non
     with pytest.raises(SystemExit, match="unknown partners 'nope'; valid choices: default"):
         main(["reproduce", "--budget", "smoke", "--out", str(out), "--partners", "nope"])
     assert not out.exists()
+
+
+def test_local_grid_hands_out_one_run_at_a_time(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    """With --jobs > 1 each run is its own task, first seeds first: a method's later seeds do
+    not wait behind its first while another process idles (the tail of the 2026-12 medium
+    grid), and start once its programs are in the compilation cache."""
+    import concurrent.futures
+    from typing import Any
+
+    submitted: list[list[str]] = []
+
+    class Threads(concurrent.futures.ThreadPoolExecutor):
+        def __init__(self, jobs: int, mp_context: object = None) -> None:
+            super().__init__(jobs)
+
+        def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> Any:
+            submitted.append([s.rel for s in args[1]])
+            return super().submit(fn, *args, **kwargs)
+
+    def task(out: str, specs: list[grid.RunSpec], budget: grid.Budget) -> list[str]:
+        return [f"{s.rel}: failed" for s in specs if s.seed == 2]
+
+    monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", Threads)
+    monkeypatch.setattr(grid, "_run_group_in_subprocess", task)
+    specs = [grid.RunSpec("spread", m, s) for m in ("nam", "transam") for s in range(3)]
+    failures = grid.run_local(tmp_path, specs, grid.BUDGETS["smoke"], jobs=2)
+    assert submitted == [[s.rel] for k in range(3) for s in specs if s.seed == k]
+    assert failures == [f"{s.rel}: failed" for s in specs if s.seed == 2]  # in grid order

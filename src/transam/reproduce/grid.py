@@ -329,9 +329,13 @@ def _run_group_in_subprocess(out: str, specs: list[RunSpec], budget: Budget) -> 
 
 
 def run_local(out: Path, specs: list[RunSpec], budget: Budget, jobs: int = 1) -> list[str]:
-    """Run the grid on this machine. With ``jobs`` > 1, that many (env, method) groups run at a
-    time in separate processes (one XLA:CPU training program does not keep two cores busy);
-    each group runs its seeds in turn and compiles once. Returns the failed runs."""
+    """Run the grid on this machine. With ``jobs`` > 1, that many runs train at a time in
+    separate processes (one XLA:CPU training program does not keep two cores busy), handed
+    out one run at a time, so no process idles while runs remain (handing out a method's seeds
+    as one task left a core idle through the last method's later seeds). Every method's first
+    seed goes first, then every second seed, and so on: by the time a method's later seed
+    starts, its programs are in the persistent compilation cache, whichever process compiled
+    them. Returns the failed runs, in grid order."""
     groups: dict[tuple[str, str], list[RunSpec]] = {}
     for spec in specs:
         groups.setdefault((spec.env, spec.method), []).append(spec)
@@ -340,15 +344,16 @@ def run_local(out: Path, specs: list[RunSpec], budget: Budget, jobs: int = 1) ->
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
-    failures: list[str] = []
+    rank = {spec: i for group in groups.values() for i, spec in enumerate(group)}
+    order = sorted(specs, key=lambda spec: rank[spec])  # stable: grid order within a rank
+    failed: dict[RunSpec, list[str]] = {}
     with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
         futures = {
-            pool.submit(_run_group_in_subprocess, str(out), group, budget): group
-            for group in groups.values()
+            pool.submit(_run_group_in_subprocess, str(out), [spec], budget): spec for spec in order
         }
-        for fut, group in futures.items():
+        for fut, spec in futures.items():
             try:
-                failures += fut.result()
+                failed[spec] = fut.result()
             except Exception as err:  # a worker process died: rerun the command to resume
-                failures += [f"{s.rel}: {type(err).__name__}: {err}" for s in group]
-    return failures
+                failed[spec] = [f"{spec.rel}: {type(err).__name__}: {err}"]
+    return [f for spec in specs for f in failed.get(spec, [])]
