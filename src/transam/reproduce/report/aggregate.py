@@ -205,12 +205,11 @@ def cell(runs: list[RunData], level_by_step: list[float | None] | None = None) -
 
 
 def cells(
-    grid: Grid, levels: dict[str, dict[str, Any] | None] | None = None
+    grid: Grid, levels: dict[str, dict[str, Any] | None]
 ) -> dict[str, dict[str, dict[str, Any]]]:
     """env -> method -> cell, in the paper's order. ``levels``: the partners' recorded levels
-    per env (:func:`~transam.reproduce.report.results.partner_levels`), for the per-step
+    per env (:func:`~transam.reproduce.report.results.grid_levels`), for the per-step
     memoryless level."""
-    levels = levels or {}
     groups: dict[tuple[str, str], list[RunData]] = {}
     for run in grid.runs:
         groups.setdefault((run.env, run.method), []).append(run)

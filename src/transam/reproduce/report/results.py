@@ -171,11 +171,10 @@ def build_results(
     grid: Grid,
     table: Table,
     figures: dict[str, str],
-    levels: dict[str, dict[str, Any] | None] | None = None,
+    levels: dict[str, dict[str, Any] | None],
 ) -> dict[str, Any]:
     """results.json of ``grid`` (aggregated into ``table``), naming the ``figures`` drawn
-    (``levels``: :func:`grid_levels`, computed when not given)."""
-    levels = grid_levels(grid) if levels is None else levels
+    (``levels``: :func:`grid_levels`)."""
     return {
         "generated": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "grid": {
