@@ -38,7 +38,7 @@ from transam.rundir import (
     read_metrics,
     run_lock,
 )
-from transam.train.config import A2CConfig, EvalConfig, TrainConfig
+from transam.train.config import A2CConfig, ConfigError, EvalConfig, TrainConfig
 from transam.train.loop import train
 
 CHUNK_STEPS = 25 * 80
@@ -145,6 +145,21 @@ def test_truncated_newest_checkpoint_resume_uses_the_previous_one(
     assert "chunk_000002.msgpack failed verification" in err and "moved aside" in err
     assert (out / "checkpoints" / "chunk_000002.msgpack.corrupt").exists()
     assert_same_as(reference, out)  # resumed from chunk 1: the same numbers
+
+
+def test_keep_checkpoints_zero_keeps_every_one_and_resume_may_change_it(
+    reference: tuple[list[dict[str, Any]], Any], tmp_path: Path
+) -> None:
+    out = tmp_path / "run"
+    assert not train(tiny(out), stop_after_chunks=3).finished
+    assert names(out) == ["chunk_000001.msgpack", "chunk_000002.msgpack"]
+    # How many are kept is how the run is driven, not what it is: --resume may change it.
+    assert train(tiny(out, resume=True, keep_checkpoints=0)).finished
+    assert names(out) == [f"chunk_{c:06d}.msgpack" for c in range(1, CHUNKS)]
+    assert "keep_checkpoints" not in json.loads((out / "config.json").read_text())
+    assert_same_as(reference, out)
+    with pytest.raises(ConfigError, match=r"keep_checkpoints must be >= 0, got -1"):
+        tiny(out, keep_checkpoints=-1).validate()
 
 
 def test_resume_with_more_steps_continues_a_finished_run_as_if_set_longer_from_the_start(

@@ -483,10 +483,10 @@ def save_checkpoint(seed_dir: Path, chunk: int, state: Any) -> Path:
     return path
 
 
-def prune_checkpoints(seed_dir: Path) -> None:
-    """Keep the newest KEEP_CHECKPOINTS checkpoints; drop temporary files of earlier writers
+def prune_checkpoints(seed_dir: Path, keep: int = KEEP_CHECKPOINTS) -> None:
+    """Keep the newest ``keep`` checkpoints (0: all); drop temporary files of earlier writers
     (killed mid-write: the caller holds the run's lock, so no one else is writing)."""
-    for _, p in sorted(checkpoints(seed_dir).items())[:-KEEP_CHECKPOINTS]:
+    for _, p in sorted(checkpoints(seed_dir).items())[:-keep] if keep else ():
         p.unlink(missing_ok=True)
     for p in (seed_dir / "checkpoints").glob(".chunk_*.msgpack.tmp*"):
         p.unlink(missing_ok=True)

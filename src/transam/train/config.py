@@ -178,6 +178,10 @@ class TrainConfig:
     checkpoint_every: int = 1
     """write a checkpoint every this many chunks (one chunk = one evaluation interval); the
     last chunk always writes one"""
+    keep_checkpoints: int = 2
+    """keep the newest this many checkpoints of each seed; 0 keeps every one (to evaluate a run
+    along its curve: ``transam evaluate RUN --checkpoint N``). Not part of the run's identity:
+    ``--resume`` may change it"""
     progress: bool = True
     """show a progress bar"""
     a2c: A2CConfig = field(default_factory=A2CConfig)
@@ -227,6 +231,7 @@ class TrainConfig:
         _at_least("seed", self.seed, 0)
         _at_least("num_seeds", self.num_seeds, 1)
         _at_least("checkpoint_every", self.checkpoint_every, 1)
+        _at_least("keep_checkpoints", self.keep_checkpoints, 0)
         a = self.a2c
         _at_least("a2c.num_envs", a.num_envs, 1)
         _at_least("a2c.n_steps", a.n_steps, 1)
@@ -299,7 +304,7 @@ class TrainConfig:
         """The settings that define the run (what ``--resume`` must match): all but where it is
         written and how it is driven."""
         d = dataclasses.asdict(self)
-        for key in ("out", "resume", "force", "progress"):
+        for key in ("out", "resume", "force", "progress", "keep_checkpoints"):
             d.pop(key)
         return d
 

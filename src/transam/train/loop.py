@@ -234,7 +234,7 @@ def _run_group(
                     for d, s in zip(dirs, unstack(jax.device_get(state)), strict=True):
                         saved = save_checkpoint(d, c, s)
                     for d in dirs:
-                        prune_checkpoints(d)
+                        prune_checkpoints(d, config.keep_checkpoints)
                 if interrupted:
                     raise RunInterrupted(
                         stop.signum or 0,
