@@ -19,8 +19,13 @@ import pytest
 
 from transam.cli import Evaluate, Export, _print_showcase
 from transam.compose import make_env
-from transam.evaluation import showcase, weights
-from transam.evaluation.final import balanced_partners, evaluate_run, population_for
+from transam.evaluation import final, showcase, weights
+from transam.evaluation.final import (
+    balanced_partners,
+    evaluate_run,
+    evaluate_starts,
+    population_for,
+)
 from transam.evaluation.probe import linear_probe, pca_2d, stratified_split
 from transam.evaluation.weights import export_run
 from transam.partners import learned
@@ -247,6 +252,37 @@ def test_cli_prints_a_summary(
     Evaluate(str(run_dir), episodes=EPISODES).run()
     out = capsys.readouterr().out
     assert "partner probe accuracy" in out and "eval_train.json" in out
+
+
+def test_a_run_played_from_given_starts_is_its_evaluation_on_those_episodes(
+    run_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Starts taken from the resets ``evaluate_run`` plays with seed 2 give exactly its
+    per-episode returns; another seed then samples other actions on the same starts."""
+    import jax
+
+    from transam.train.programs import env_and_model
+
+    env = env_and_model(load_run_config(run_dir))[0]
+    team = balanced_partners(EPISODES, env.num_partners)
+    k_reset, _ = jax.random.split(jax.random.key(2))
+    states, _ = jax.vmap(env.reset)(jax.random.split(k_reset, EPISODES), team)
+    path = tmp_path / "theirs.npz"
+    np.savez(path, positions=np.asarray(states.game.p_pos), team=team, group=team % 2)
+    res = evaluate_starts(run_dir, path, seed=2, out=tmp_path)
+    expected = final.paired_random_returns(run_dir, EPISODES, seed=2)[0]
+    np.testing.assert_allclose(res["returns"], expected, rtol=1e-6)
+    assert res["team"] == team.tolist() and sorted(res["per_group"]) == [0, 1]
+    assert res["return"]["mean"] == pytest.approx(np.mean(expected))
+    assert {"action_accuracy_newest", "policy_entropy"} <= set(res)
+    on_disk = json.loads((tmp_path / "eval_starts-theirs.json").read_text())
+    assert on_disk["returns"] == res["returns"] and on_disk["step"] == res["step"]
+    other = evaluate_starts(run_dir, path, seed=3, out=tmp_path)["returns"]
+    assert not np.allclose(other, expected)
+    Evaluate(str(run_dir), starts=str(path), out=str(tmp_path)).run()
+    assert "group 1" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="--starts plays the run's own partners"):
+        Evaluate(str(run_dir), starts=str(path), partners="heldout").run()
 
 
 def test_nam_has_no_decoder_metrics_and_no_probe(smoke_grid: Path, tmp_path: Path) -> None:

@@ -478,6 +478,10 @@ class Evaluate:
     out: str | None = None
     """where to write the outputs (default: the run directory; runs/pretrained/NAME for a
     shipped pretrained run)"""
+    starts: str | None = None
+    """instead, play the episodes of a starts file (given start positions and partner teams of
+    the run's population, e.g. another codebase's evaluation episodes; MPE games; format in
+    transam.envs.starts) and write eval_starts-STEM.json (--episodes and --partners unused)"""
 
     def run(self) -> None:
         from transam.evaluation.final import EVAL_METRICS, evaluate_run, output_dir
@@ -485,6 +489,9 @@ class Evaluate:
         from transam.rundir import evaluation_path, projection_path
 
         enable_compilation_cache()
+        if self.starts is not None:
+            self._run_starts(self.starts)
+            return
         dest = output_dir(self.run_dir, self.out)
         res = evaluate_run(
             self.run_dir, self.episodes, self.partners, self.checkpoint, self.seed, self.out
@@ -510,6 +517,35 @@ class Evaluate:
         console.print(f"wrote {path}, {path.with_suffix('.png')}")
         if "pca" in res:
             console.print(f"wrote {projection_path(dest, self.partners)}")
+
+    def _run_starts(self, starts: str) -> None:
+        from transam.evaluation.final import EVAL_METRICS, evaluate_starts, output_dir
+
+        if self.partners != "train":
+            raise SystemExit(
+                f"error: --starts plays the run's own partners (its team indices); got "
+                f"--partners {self.partners}"
+            )
+        res = evaluate_starts(self.run_dir, starts, self.checkpoint, self.seed, self.out)
+        table = Table(
+            title=f"{res['env']}/{res['method']} seed {res['seed']}, {res['checkpoint']} "
+            f"(step {res['step']:,}), the {res['episodes']} episodes of {starts}"
+        )
+        table.add_column("episodes")
+        table.add_column("return", justify="right")
+        r = res["return"]
+        table.add_row("all", f"{r['mean']:.4g} ± {r['se']:.2g} (s.e.)")
+        if len(res["per_group"]) > 1:
+            for g, mean in res["per_group"].items():
+                table.add_row(f"group {g}", f"{mean:.4g}")
+        for key in EVAL_METRICS:
+            if key in res:
+                table.add_row(key.replace("_", " "), f"{res[key]:.4g}")
+        console.print(table)
+        for note in res["notes"]:
+            console.print(f"note: {note}")
+        dest = output_dir(self.run_dir, self.out)
+        console.print(f"wrote {dest / f'eval_starts-{Path(starts).stem}.json'}")
 
 
 @dataclass

@@ -217,7 +217,13 @@ class ControlledEnv:
             partner = jax.random.randint(key_partner, (), 0, self.num_partners, dtype=jnp.int32)
         else:
             partner = jnp.asarray(partner_id, dtype=jnp.int32)
-        game_state = self.game.reset(key_game)
+        return self.reset_to(self.game.reset(key_game), partner)
+
+    def reset_to(self, game_state: Any, partner_id: Any) -> tuple[EnvState, jax.Array]:
+        """Start an episode from a given game state (e.g. another codebase's start positions:
+        :mod:`transam.envs.starts`) with partner ``partner_id``."""
+        self.check_partner(partner_id)
+        partner = jnp.asarray(partner_id, dtype=jnp.int32)
         obs, other_obs = self.game.observe(game_state)
         state = EnvState(
             game=game_state,

@@ -14,7 +14,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from transam.envs.core import ControlledEnv, EnvState, Timestep
+from transam.envs.core import ControlledEnv, EnvError, EnvState, Timestep
+from transam.envs.starts import Starts
 
 Rollout = Callable[[jax.Array], tuple[EnvState, Timestep]]
 
@@ -24,14 +25,21 @@ def make_random_rollout(
     num_envs: int,
     num_steps: int,
     policy: Callable[[jax.Array, jax.Array], jax.Array] | None = None,
+    starts: Starts | None = None,
 ) -> Rollout:
     """A jitted ``key -> (final states, timesteps [num_steps, num_envs])`` function; the
-    controlled agent plays uniformly at random, or ``policy(key, obs) -> action`` when given."""
+    controlled agent plays uniformly at random, or ``policy(key, obs) -> action`` when given.
+    With ``starts`` (``num_envs`` of them) the first episodes begin there."""
     n_act = env.spec.num_actions
+    if starts is not None and starts.episodes != num_envs:
+        raise EnvError(f"{starts.episodes} starts for {num_envs} environment copies")
 
     def run(key: jax.Array) -> tuple[EnvState, Timestep]:
         key_reset, key_run = jax.random.split(key)
-        states, obs = jax.vmap(env.reset)(jax.random.split(key_reset, num_envs))
+        if starts is None:
+            states, obs = jax.vmap(env.reset)(jax.random.split(key_reset, num_envs))
+        else:
+            states, obs = jax.vmap(env.reset_to)(starts.game, jnp.asarray(starts.team))
 
         def one_step(
             carry: tuple[EnvState, jax.Array], key: jax.Array

@@ -142,6 +142,76 @@ def paired_random_returns(
     return out[0], out[1]
 
 
+def evaluate_starts(
+    run_dir: str | Path,
+    starts: str | Path,
+    checkpoint: str | int | None = None,
+    seed: int = 0,
+    out: str | Path | None = None,
+) -> dict[str, Any]:
+    """Play a run's checkpoint on the episodes of a starts file (:mod:`transam.envs.starts`:
+    given start positions and partner teams, e.g. another codebase's evaluation episodes),
+    against the run's own partner population, and write ``eval_starts-STEM.json`` into
+    :func:`output_dir`: ``return`` {mean, std, se}, ``per_group`` {group: mean return}, the
+    per-episode ``returns``, ``team`` and ``group``, ``policy_entropy`` and the agent-modeling
+    metrics the model predicts. Actions are sampled as in every evaluation (``eval.greedy``)."""
+    from transam.envs.starts import load_starts
+    from transam.train.programs import env_and_model, program_key
+
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
+    dest = output_dir(run_dir, out)
+    run_dir = resolve_run(run_dir)
+    config = load_run_config(run_dir)
+    env, _ = env_and_model(config)
+    st = load_starts(starts, env)  # a bad file fails before anything is written
+    top = run_dir if (run_dir / "config.json").exists() else run_dir.parent
+    lock = top if dest == run_dir else dest
+    lock.mkdir(parents=True, exist_ok=True)
+    with run_lock(lock, "transam evaluate --starts"):
+        notes: list[str] = []
+        w = restore_weights(config, run_dir, checkpoint, notes)
+        run = _program(program_key(config), st.episodes)
+        ep = jax.device_get(
+            run(
+                w.policy_params,
+                w.model_params,
+                jax.random.key(seed),
+                jnp.asarray(st.team),
+                st.game,
+            )
+        )
+        live = np.asarray(ep.live, np.float64)
+        returns = np.asarray(ep.reward, np.float64).sum(0)
+        res: dict[str, Any] = {
+            "env": config.env,
+            "method": config.method,
+            "seed": config.seed,
+            "starts": st.source,
+            "checkpoint": w.source,
+            "step": w.step,
+            "episodes": st.episodes,
+            "greedy": config.eval.greedy,
+            "return": {
+                "mean": float(returns.mean()),
+                "std": float(returns.std()),
+                "se": float(returns.std(ddof=1) / np.sqrt(len(returns))),
+            },
+            "per_group": {
+                int(g): float(returns[st.group == g].mean()) for g in np.unique(st.group)
+            },
+        }
+        for key in (*EVAL_METRICS, POLICY_ENTROPY):
+            if key in ep.scores:
+                res[key] = float(np.asarray(ep.scores[key], np.float64).sum() / live.sum())
+        res["returns"] = [float(r) for r in returns]
+        res["team"] = [int(t) for t in st.team]
+        res["group"] = [int(g) for g in st.group]
+        res["notes"] = notes
+        write_json(dest / f"eval_starts-{Path(starts).stem}.json", res)
+    return res
+
+
 def _per_step_mean(values: np.ndarray, live: np.ndarray) -> list[float | None]:
     count = live.sum(1)
     return [float(v / c) if c > 0 else None for v, c in zip(values.sum(1), count, strict=True)]

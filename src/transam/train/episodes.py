@@ -70,14 +70,17 @@ class Episodes:
     action: jax.Array  # [T, N] int32 the controlled agent's action (meaningless when dead)
 
 
-EpisodesFn = Callable[[Any, Any, jax.Array, jax.Array | None], Episodes]
+EpisodesFn = Callable[..., Episodes]
+"""``(policy_params, model_params, key, partner=None, start=None) -> Episodes``."""
 
 
 def make_episodes(
     config: TrainConfig, env: ControlledEnv, model: AgentModel, n: int, positions: bool = False
 ) -> EpisodesFn:
-    """``(policy_params, model_params, key, partner) -> Episodes`` of ``n`` episodes (pure; not
-    jitted). ``partner`` ([n] int32) fixes each episode's partner; None draws them uniformly.
+    """``(policy_params, model_params, key, partner, start) -> Episodes`` of ``n`` episodes
+    (pure; not jitted). ``partner`` ([n] int32) fixes each episode's partner; None draws them
+    uniformly. ``start`` (the game's state, leading axis n; with ``partner``) starts the episodes
+    there instead of at fresh resets (:mod:`transam.envs.starts`).
     ``positions`` adds the all-positions metrics where the model has them (module docstring)."""
     length = env.spec.episode_len
     policy = make_policy(config, env)
@@ -88,11 +91,19 @@ def make_episodes(
     dropout = config.acting_dropout
 
     def episodes(
-        policy_params: Any, model_params: Any, key: jax.Array, partner: jax.Array | None = None
+        policy_params: Any,
+        model_params: Any,
+        key: jax.Array,
+        partner: jax.Array | None = None,
+        start: Any = None,
     ) -> Episodes:
         k_reset, k_run = jax.random.split(key)
         reset_keys = jax.random.split(k_reset, n)
-        if partner is None:
+        if start is not None:
+            if partner is None:
+                raise ValueError("episodes from given starts need their partners too")
+            state0, obs = jax.vmap(env.reset_to)(start, jnp.asarray(partner, jnp.int32))
+        elif partner is None:
             state0, obs = jax.vmap(env.reset)(reset_keys)
         else:
             state0, obs = jax.vmap(env.reset)(reset_keys, jnp.asarray(partner, jnp.int32))
