@@ -21,8 +21,8 @@ returns must agree to float precision if our environment and imported population
         --out docs/results/parity/paired "TransAM, defaults=runs/parity/defaults"
 
 Needs every checkpoint of the steps played (``transam train --keep-checkpoints 0``). Writes
-``paired.md`` and ``paired.json`` into ``--out``; the evaluations go to ``--work`` (one JSON per
-seed and checkpoint, reused when re-run).
+``paired.md``, ``paired.json`` and ``paired.png`` into ``--out``; the evaluations go to
+``--work`` (one JSON per seed and checkpoint, reused when re-run).
 """
 
 from __future__ import annotations
@@ -113,6 +113,35 @@ def fixed_check(starts: Path, run: Path, fixed: Path) -> dict[str, Any]:
         "max_abs_diff": float(diff.max()),
         "episodes_over_1e-3": int((diff > 1e-3).sum()),
     }
+
+
+def figure(path: Path, steps: list[int], theirs: np.ndarray, runs: dict[str, Any]) -> None:
+    """Per evaluation point: their logged return and each run's, on their episodes and on our
+    own draws (means over seeds, each seed a dot)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = np.array(steps) / 1000
+    fig, ax = plt.subplots(figsize=(8, 4))
+
+    def draw(values: np.ndarray, label: str, style: str, shift: float) -> None:
+        (line,) = ax.plot(x + shift, values.mean(0), style, label=label)
+        for v in values:
+            ax.plot(x + shift, v, ".", color=line.get_color(), alpha=0.4)
+
+    draw(theirs, "the authors' loop (logged, their episodes)", "k-", 0.0)
+    for label, r in runs.items():
+        draw(np.array(r["on_their_episodes"]), f"{label}: their episodes", "-", 2.0)
+        draw(np.array(r["on_our_draws"]), f"{label}: our own draws", "--", 4.0)
+    ax.set_xlabel("controlled steps (thousands)")
+    ax.set_ylabel("evaluation return (100 episodes)")
+    ax.set_title("The same episodes: each evaluation point of the authors' loop")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 def main() -> None:
@@ -209,6 +238,7 @@ def main() -> None:
             "1e-3).",
         ]
     args.out.mkdir(parents=True, exist_ok=True)
+    figure(args.out / "paired.png", steps, theirs, result["runs"])
     (args.out / "paired.json").write_text(json.dumps(result, indent=1) + "\n")
     (args.out / "paired.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
