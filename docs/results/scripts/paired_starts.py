@@ -32,19 +32,20 @@ import csv
 import json
 import math
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306}
+sys.path.insert(0, str(Path(__file__).parent))
+from parity_plot import T975, mean_ci
 
 
 def interval(values: np.ndarray) -> tuple[float, float]:
-    """Mean and 95% t half-width over the first axis."""
-    n = len(values)
-    half = T975.get(n - 1, 1.96) * values.std(ddof=1) / math.sqrt(n) if n > 1 else math.nan
-    return float(values.mean()), float(half)
+    """Mean and 95% t half-width over seeds (the first axis)."""
+    mean, half = mean_ci(values)
+    return float(mean), float(half)
 
 
 def welch(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
