@@ -520,6 +520,7 @@ class Evaluate:
 
     def _run_starts(self, starts: str) -> None:
         from transam.evaluation.final import EVAL_METRICS, evaluate_starts, output_dir
+        from transam.rundir import starts_evaluation_path
 
         if self.partners != "train":
             raise SystemExit(
@@ -544,8 +545,7 @@ class Evaluate:
         console.print(table)
         for note in res["notes"]:
             console.print(f"note: {note}")
-        dest = output_dir(self.run_dir, self.out)
-        console.print(f"wrote {dest / f'eval_starts-{Path(starts).stem}.json'}")
+        console.print(f"wrote {starts_evaluation_path(output_dir(self.run_dir, self.out), starts)}")
 
 
 @dataclass

@@ -380,6 +380,11 @@ def evaluation_path(run_dir: str | Path, partners: str) -> Path:
     return Path(run_dir) / f"eval_{evaluation_label(partners)}.json"
 
 
+def starts_evaluation_path(run_dir: str | Path, starts: str | Path) -> Path:
+    """Where ``transam evaluate --starts FILE`` writes its JSON."""
+    return Path(run_dir) / f"eval_starts-{Path(starts).stem}.json"
+
+
 def projection_path(run_dir: str | Path, partners: str) -> Path:
     """Where ``transam evaluate`` writes the 2-D projection of the embeddings."""
     return Path(run_dir) / f"eval_{evaluation_label(partners)}_pca.npz"

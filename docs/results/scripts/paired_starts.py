@@ -80,9 +80,10 @@ def chunk_at(seed_dir: Path, step: int) -> tuple[int, int, float]:
 
 def play(seed_dir: Path, starts: Path, chunk: int, work: Path) -> dict[str, Any]:
     from transam.evaluation.final import evaluate_starts
+    from transam.rundir import starts_evaluation_path
 
     out = work / seed_dir.name / f"chunk_{chunk:06d}"
-    path = out / f"eval_starts-{starts.stem}.json"
+    path = starts_evaluation_path(out, starts)
     if path.exists():
         return dict(json.loads(path.read_text()))
     return evaluate_starts(seed_dir, starts, checkpoint=chunk, seed=0, out=out)

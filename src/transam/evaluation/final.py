@@ -47,10 +47,11 @@ over the episodes' steps; on the MPE games action 0 is "no move"), ``per_partner
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import io
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -70,6 +71,7 @@ from transam.rundir import (
     projection_path,
     recorded_population,
     run_lock,
+    starts_evaluation_path,
     write_atomic,
     write_json,
 )
@@ -158,17 +160,13 @@ def evaluate_starts(
     from transam.envs.starts import load_starts
     from transam.train.programs import env_and_model, program_key
 
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
+    _check_seed(seed)
     dest = output_dir(run_dir, out)
     run_dir = resolve_run(run_dir)
     config = load_run_config(run_dir)
     env, _ = env_and_model(config)
     st = load_starts(starts, env)  # a bad file fails before anything is written
-    top = run_dir if (run_dir / "config.json").exists() else run_dir.parent
-    lock = top if dest == run_dir else dest
-    lock.mkdir(parents=True, exist_ok=True)
-    with run_lock(lock, "transam evaluate --starts"):
+    with _locked(run_dir, dest, "transam evaluate --starts"):
         notes: list[str] = []
         w = restore_weights(config, run_dir, checkpoint, notes)
         run = _program(program_key(config), st.episodes)
@@ -208,7 +206,7 @@ def evaluate_starts(
         res["team"] = [int(t) for t in st.team]
         res["group"] = [int(g) for g in st.group]
         res["notes"] = notes
-        write_json(dest / f"eval_starts-{Path(starts).stem}.json", res)
+        write_json(starts_evaluation_path(dest, starts), res)
     return res
 
 
@@ -243,17 +241,29 @@ def evaluate_run(
     that verifies and notes each newer one that does not."""
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 2:
         raise ConfigError(f"episodes must be an integer >= 2, got {episodes!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
+    _check_seed(seed)
     dest = output_dir(run_dir, out)
     run_dir = resolve_run(run_dir)
     config = load_run_config(run_dir)
     population_for(config.partners, partners)  # checks ``partners``
+    with _locked(run_dir, dest, "transam evaluate") as top:
+        return _evaluate_locked(run_dir, top, dest, config, episodes, partners, checkpoint, seed)
+
+
+def _check_seed(seed: Any) -> None:
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
+
+
+@contextlib.contextmanager
+def _locked(run_dir: Path, dest: Path, command: str) -> Iterator[Path]:
+    """Hold the lock of where an evaluation writes (the run's top directory when it writes
+    into the run, else ``dest``); yields the run's top directory (above ``seed_S/``)."""
     top = run_dir if (run_dir / "config.json").exists() else run_dir.parent
     lock = top if dest == run_dir else dest
     lock.mkdir(parents=True, exist_ok=True)
-    with run_lock(lock, "transam evaluate"):
-        return _evaluate_locked(run_dir, top, dest, config, episodes, partners, checkpoint, seed)
+    with run_lock(lock, command):
+        yield top
 
 
 def _evaluate_locked(
