@@ -10,9 +10,10 @@
 #   ONLY="clock critic_no_z" docs/results/scripts/deviations.sh     some rows
 #   SMOKE=1 docs/results/scripts/deviations.sh          5k steps, 2 seeds, default population
 #   PRESET=none ONLY=gae_advantage docs/results/scripts/deviations.sh
-#                       the row on top of the defaults (the preset with the action loss fixed and the clock)
-#                       instead of the preset: outputs in runs/deviations-defaults, baseline
-#                       runs/parity/defaults (parity.sh's run of the current defaults)
+#                       the row on top of the final defaults (the preset with the action loss
+#                       fixed, and the clock) instead of the preset: outputs in
+#                       runs/deviations-defaults, baseline runs/parity/defaults (parity.sh's run
+#                       of the current defaults), table deviations-final.md
 # Re-running resumes unfinished runs and skips finished ones. Overrides as in parity.sh, plus
 # BASELINE (the preset run) and TABLE (output markdown).
 set -euo pipefail
@@ -34,7 +35,7 @@ else
   if [[ $PRESET == none ]]; then
     OUT=${OUT:-runs/deviations-defaults}
     BASELINE=${BASELINE:-runs/parity/defaults}
-    TABLE=${TABLE:-docs/results/parity/deviations-defaults.md}
+    TABLE=${TABLE:-docs/results/parity/deviations-final.md}
   fi
   OUT=${OUT:-runs/deviations}
   STEPS=${STEPS:-625000}
@@ -94,6 +95,6 @@ for row in "${ROWS[@]}"; do
 done
 
 label="preset (authors)"
-[[ $PRESET == none ]] && label="defaults"
+[[ $PRESET == none ]] && label="final defaults"
 python "$HERE/deviation_table.py" --baseline "$BASELINE" --baseline-label "$label" \
   --out "$TABLE" "${args[@]}"
