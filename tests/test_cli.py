@@ -53,6 +53,14 @@ def test_bad_values_are_rejected_with_the_valid_choices(
         main(["envs", "bench", "--num-envs", "0"])
     with pytest.raises(SystemExit, match=r"--window must be between 1 and .* 25 .*got 26"):
         main(["partners", "diversity", "spread", "--window", "26"])
+    with pytest.raises(SystemExit, match=r"unknown partners '/nope'; valid choices: default"):
+        main(["partners", "diversity", "spread", "--population", "/nope"])
+    with pytest.raises(SystemExit, match=r"--population .* takes none of --heldout, --record"):
+        main(["partners", "diversity", "spread", "--population", "/nope", "--record"])
+    with pytest.raises(SystemExit, match="--agent landmark is a Spread rule; pass ENV spread"):
+        main(["partners", "diversity", "tag", "--agent", "landmark"])
+    with pytest.raises(SystemExit, match="--agent landmark takes no --record"):
+        main(["partners", "diversity", "spread", "--agent", "landmark", "--record"])
     with pytest.raises(SystemExit, match="--episodes must be at least 1, got 0"):
         main(["partners", "show", "tag", "--episodes", "0"])
     # Tag's default population is LIAM's, imported: training it is refused with the way out.

@@ -35,8 +35,15 @@ def sign_rule(key: jax.Array, obs: jax.Array) -> jax.Array:
     return jnp.where(obs[2] < 0, 1, 2).astype(jnp.int32)
 
 
+def brake_rule(key: jax.Array, obs: jax.Array) -> jax.Array:
+    """Deterministic in its own x velocity, which the controlled agent does not observe:
+    pushes against it (+x when moving -x), so it oscillates."""
+    return jnp.where(obs[0] < 0, 2, 1).astype(jnp.int32)
+
+
 MEMBERS = [
     Member("rule", sign_rule),  # no declared probabilities: sampled
+    Member("brake", brake_rule),
     Member("fixed", fixed_act, probs=lambda obs: FIXED),  # declared: exact
     Member("fixed_sampled", fixed_act),
     Member("uniform", uniform_act),
@@ -91,7 +98,7 @@ def test_memoryless_level_of_constructed_populations() -> None:
     assert len(own["by_step"]) == env.spec.episode_len
     assert np.mean(own["by_step"]) == pytest.approx(own["accuracy"], abs=1e-9)
     assert np.median(own["by_step"]) > 0.8  # 16 test samples a step: single steps vary
-    with pytest.raises(ValueError, match="unknown view 'theirs'; valid choices: partner, own"):
+    with pytest.raises(ValueError, match="view 'theirs'; valid choices: partner, own, own2"):
         memoryless_accuracy(steps, 5, cfg, view="theirs")
     # A member that ignores its observation and acts uniformly: about 1/5.
     env = spread_with([("uniform", "uniform"), ("uniform", "uniform")])
@@ -127,3 +134,27 @@ def test_report_puts_accuracy_beside_recorded_levels(monkeypatch: pytest.MonkeyP
     assert "| *ceiling E[max π(a|o)]* | 84.0 | not recorded |" in md
     assert "| *memoryless, team-agnostic* | 53.0 | not recorded |" in md
     assert "| **TransAM** (newest) | 41.0 | 41.0 |" in md and "spread abc" in md
+
+
+def test_two_step_view_reads_the_partners_velocity() -> None:
+    """A rule of the partner's own velocity: readable from its observation and, through the
+    change of its relative position, from two of the controlled agent's; not from one."""
+    cfg = LevelsConfig(train_steps=1500)
+    env = spread_with([("brake", "brake"), ("brake", "brake")])
+    steps = collect_partner_steps(env, episodes_per_team=16, seed=3)  # type: ignore[arg-type]
+    partner = memoryless_accuracy(steps, 5, cfg)["accuracy"]
+    own = memoryless_accuracy(steps, 5, cfg, view="own")["accuracy"]
+    own2 = memoryless_accuracy(steps, 5, cfg, view="own2")["accuracy"]
+    assert partner > 0.9 and own2 > 0.85
+    assert own2 > own + 0.1, (own, own2)
+
+
+def test_partner_steps_with_a_controlled_policy() -> None:
+    """``controlled`` replaces the random controlled agent: one that never moves keeps its
+    own velocity (the first two entries of its observation) at zero; a random one does not."""
+    env = spread_with([("rule", "rule")])
+    still = lambda key, obs: jnp.zeros((), jnp.int32)
+    steps = collect_partner_steps(env, 2, seed=0, controlled=still)  # type: ignore[arg-type]
+    assert not np.abs(steps.own_obs[:, :, :2]).any()
+    steps = collect_partner_steps(env, 2, seed=0)  # type: ignore[arg-type]
+    assert np.abs(steps.own_obs[:, :, :2]).any()

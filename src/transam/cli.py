@@ -145,20 +145,7 @@ class EnvsRollout:
 
         _check_positive(episodes=self.episodes, num_envs=self.num_envs)
         envs = _envs_for(self.partners, self.envs)
-        policy = None
-        if self.agent == "landmark":
-            if set(envs) != {"spread"}:
-                raise SystemExit(
-                    "error: --agent landmark is a Spread rule; pass --envs spread "
-                    f"(got --envs {' '.join(envs)})"
-                )
-            from transam.partners.spread import landmark_agent
-
-            policy = landmark_agent
-        elif self.agent != "random":
-            raise SystemExit(
-                f"error: unknown --agent {self.agent!r}; valid choices: {', '.join(ROLLOUT_AGENTS)}"
-            )
+        policy = _controlled_agent(self.agent, envs, "--envs")
         summary = Table(
             title=f"{self.agent} controlled agent: return (worst/best = team means), "
             f"{self.episodes * self.num_envs} episodes per env"
@@ -215,6 +202,25 @@ def _envs_for(partners: str, envs: tuple[EnvName, ...]) -> tuple[str, ...]:
             f"{made_for}"
         )
     return (made_for,)
+
+
+def _controlled_agent(agent: str, envs: tuple[str, ...], flag: str) -> Any:
+    """The controlled agent's policy of ``--agent`` (None: uniformly random), checked against
+    the envs it is to play (``flag`` names the option that chose them)."""
+    if agent == "random":
+        return None
+    if agent != "landmark":
+        raise SystemExit(
+            f"error: unknown --agent {agent!r}; valid choices: {', '.join(ROLLOUT_AGENTS)}"
+        )
+    if set(envs) != {"spread"}:
+        raise SystemExit(
+            f"error: --agent landmark is a Spread rule; pass {flag} spread "
+            f"(got {flag} {' '.join(envs)})"
+        )
+    from transam.partners.spread import landmark_agent
+
+    return landmark_agent
 
 
 def _num(x: float) -> str:
@@ -758,6 +764,11 @@ class PartnersDiversity:
     env: tyro.conf.Positional[EnvName]
     heldout: bool = False
     heuristic: bool = False  # the scripted population (partners="heuristic") instead
+    population: str | None = None
+    """a population directory instead (e.g. written by import-authors); no cross-play"""
+    agent: Literal["random", "landmark"] = "random"
+    """the controlled agent while measuring the accuracy levels: uniformly random, or (Spread)
+    the landmark rule, to see how much the levels depend on the states it visits"""
     window: int = 10  # steps per classifier sample
     record: bool = False  # store the results in the shipped manifest (docs/partners.md quotes it)
 
@@ -775,14 +786,24 @@ class PartnersDiversity:
             partner_id_accuracy,
         )
 
-        if self.heuristic and (self.heldout or self.record):
+        other = "--heuristic" if self.heuristic else "--population" if self.population else None
+        if other and (self.heldout or self.record or (self.heuristic and self.population)):
             raise SystemExit(
-                "error: --heuristic measures the scripted population, which has no manifest "
-                "entry: it takes neither --heldout nor --record"
+                f"error: {other} measures a population without an entry in the shipped "
+                "manifest: it takes none of --heldout, --record, and not both --heuristic and "
+                "--population"
+            )
+        agent = _controlled_agent(self.agent, (self.env,), "ENV")
+        if agent is not None and self.record:
+            raise SystemExit(
+                "error: the recorded levels are random play's: --agent landmark takes no --record"
             )
         split = "heuristic" if self.heuristic else _partner_split(self.heldout)
         if self.heuristic:
             env = make_env(self.env, partners="heuristic")
+        elif self.population is not None:
+            split = self.population
+            env = make_env(self.env, partners=self.population)
         else:
             env = make_env(self.env, population=learned.population(self.env, split))
         if not 1 <= self.window <= env.spec.episode_len:
@@ -790,7 +811,7 @@ class PartnersDiversity:
                 f"error: --window must be between 1 and {self.env}'s episode length "
                 f"{env.spec.episode_len} (a window stays inside one episode), got {self.window}"
             )
-        if self.env in ("lbf", "overcooked") and not self.heuristic:
+        if self.env in ("lbf", "overcooked") and not (self.heuristic or self.population):
             members = learned.learned_members(self.env, split)
             names = list(members)
             mat = cross_play(self.env, [members[n] for n in names])
@@ -809,7 +830,7 @@ class PartnersDiversity:
             f"chance {acc['chance']:.3f} ({acc['teams']} teams, window {self.window})"
         )
         lv_cfg = LevelsConfig()
-        levels = action_levels(env, lv_cfg)
+        levels = action_levels(env, lv_cfg, agent)
         table = Table(title=f"{self.env} {split}: partners' action-accuracy levels")
         table.add_column("level")
         table.add_column("value", justify="right")
@@ -827,8 +848,18 @@ class PartnersDiversity:
             f"{levels['memoryless_own']:.3f}",
             "the same from the controlled agent's current obs (an agent model without history)",
         )
+        table.add_row(
+            "memoryless (own view, 2 steps)",
+            f"{levels['memoryless_own2']:.3f}",
+            "the same from its current and previous obs (the partners' velocities readable)",
+        )
         table.add_row("majority", f"{levels['majority']:.3f}", "each slot's most frequent action")
         console.print(table)
+        by_step = levels["memoryless_own_by_step"]
+        console.print(
+            "memoryless (own view) by step of the episode: "
+            + " ".join("-" if v is None else f"{v:.2f}" for v in by_step)
+        )
         sampled = set(levels["sampled"])
         console.print(
             "member ceilings: "
@@ -837,7 +868,7 @@ class PartnersDiversity:
             )
             + f" (* measured by sampling act {lv_cfg.samples}x per obs; others from their "
             f"probabilities); {lv_cfg.episodes_per_team} episodes per team, {levels['steps']:,} "
-            "partner steps, random controlled agent"
+            f"partner steps, {self.agent} controlled agent"
         )
         if self.record:
             found = diversity_record(self.env, self.heldout, self.window, acc, levels, lv_cfg)

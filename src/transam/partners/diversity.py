@@ -22,7 +22,12 @@
     partner's action from that partner's current observation and slot alone, trained pooled
     over all teams (every 4th episode of each team held out). A model at this level has
     learned nothing about whom it plays with; ``majority`` (each slot's most frequent action)
-    gives the scale.
+    gives the scale. The same from the controlled agent's view, from one step and from two
+    (:func:`memoryless_accuracy`'s ``view``).
+
+  ``controlled`` replaces the uniformly random controlled agent by a policy of its own
+  observation (e.g. Spread's landmark rule), to see how much the levels depend on the states
+  the controlled agent visits (a trained agent's are not random play's).
 """
 
 from __future__ import annotations
@@ -37,7 +42,7 @@ import numpy as np
 import optax
 
 from transam.envs.core import ControlledEnv
-from transam.envs.population import Member, Population
+from transam.envs.population import Member, PolicyFn, Population
 from transam.partners import learned
 from transam.partners.train import apply
 
@@ -212,8 +217,11 @@ class PartnerSteps:
     episode: np.ndarray  # [E] index of the episode within its team
 
 
-def collect_partner_steps(env: ControlledEnv, episodes_per_team: int, seed: int) -> PartnerSteps:
-    """Whole episodes of every team with a uniformly random controlled agent."""
+def collect_partner_steps(
+    env: ControlledEnv, episodes_per_team: int, seed: int, controlled: PolicyFn | None = None
+) -> PartnerSteps:
+    """Whole episodes of every team with a uniformly random controlled agent, or with
+    ``controlled(key, obs) -> action``."""
     if episodes_per_team < 1:
         raise ValueError(f"episodes_per_team must be >= 1, got {episodes_per_team}")
     m, length = env.num_partners, env.spec.episode_len
@@ -227,8 +235,11 @@ def collect_partner_steps(env: ControlledEnv, episodes_per_team: int, seed: int)
         def body(carry: tuple, k: jax.Array) -> tuple:
             state, alive = carry
             ka, ks = jax.random.split(k)
-            a = jax.random.randint(ka, (), 0, n_act, dtype=jnp.int32)
             own = state.obs
+            if controlled is None:
+                a = jax.random.randint(ka, (), 0, n_act, dtype=jnp.int32)
+            else:
+                a = jnp.asarray(controlled(ka, own), jnp.int32)
             state, ts = env.step(ks, state, a)
             rec = ts.record
             return (state, alive & ~ts.done), (rec.other_obs, own, rec.other_actions, alive)
@@ -314,16 +325,26 @@ def memoryless_accuracy(
     test samples}; every 4th episode of each team is test. ``view``: ``"partner"`` reads the
     partner's own observation; ``"own"`` the controlled agent's current observation (what an
     agent model has at one step, without its history: the level it must beat, and, by step,
-    the level its accuracy within the episode is read against: early steps are easier)."""
+    the level its accuracy within the episode is read against: early steps are easier);
+    ``"own2"`` its current observation and the change since the previous one (none at the
+    first step; the change rather than the previous observation itself, which holds the same
+    information, because the MLP learns it far faster): the partners' velocities, which their
+    own observations hold and the agent's one does not, are then readable, so a model above
+    ``"own"`` but not above ``"own2"`` may have learned the state and nothing of whom it plays
+    with."""
     cfg = cfg or LevelsConfig()
     e, t, n, _ = steps.obs.shape
     slot = np.broadcast_to(np.eye(n, dtype=np.float32), (e, t, n, n))
     if view == "partner":
         seen = steps.obs
-    elif view == "own":
-        seen = np.broadcast_to(steps.own_obs[:, :, None, :], (e, t, n, steps.own_obs.shape[-1]))
+    elif view in ("own", "own2"):
+        own = steps.own_obs
+        if view == "own2":
+            before = np.concatenate([own[:, :1], own[:, :-1]], 1)
+            own = np.concatenate([own, own - before], -1)
+        seen = np.broadcast_to(own[:, :, None, :], (e, t, n, own.shape[-1]))
     else:
-        raise ValueError(f"unknown view {view!r}; valid choices: partner, own")
+        raise ValueError(f"unknown view {view!r}; valid choices: partner, own, own2")
     x = np.concatenate([seen, slot], -1)
     test = np.broadcast_to((steps.episode % 4 == 0)[:, None, None], (e, t, n))
     live = np.broadcast_to(steps.live[..., None], (e, t, n))
@@ -348,22 +369,27 @@ def memoryless_accuracy(
     }
 
 
-def action_levels(env: ControlledEnv, cfg: LevelsConfig | None = None) -> dict[str, Any]:
+def action_levels(
+    env: ControlledEnv, cfg: LevelsConfig | None = None, controlled: PolicyFn | None = None
+) -> dict[str, Any]:
     """The ceiling and the memoryless levels of ``env``'s population (module docstring):
     {"ceiling", "members", "sampled", "memoryless" (from the partner's own observation),
     "memoryless_own" (from the controlled agent's current observation), "memoryless_own_by_step"
-    (the same per timestep), "majority", "steps"}."""
+    (the same per timestep), "memoryless_own2" (from its current and previous ones),
+    "majority", "steps"}."""
     cfg = cfg or LevelsConfig()
-    steps = collect_partner_steps(env, cfg.episodes_per_team, cfg.seed)
+    steps = collect_partner_steps(env, cfg.episodes_per_team, cfg.seed, controlled)
     num_actions = env.spec.other_num_actions
     ceiling = action_ceiling(env.population, steps, num_actions, cfg.samples, cfg.seed)
     memoryless = memoryless_accuracy(steps, num_actions, cfg)
     own = memoryless_accuracy(steps, num_actions, cfg, view="own")
+    own2 = memoryless_accuracy(steps, num_actions, cfg, view="own2")
     return {
         **ceiling,
         "memoryless": memoryless["accuracy"],
         "memoryless_own": own["accuracy"],
         "memoryless_own_by_step": own["by_step"],
+        "memoryless_own2": own2["accuracy"],
         "majority": memoryless["majority"],
         "steps": int(steps.live.sum()) * steps.obs.shape[2],
     }
