@@ -855,11 +855,13 @@ class PartnersDiversity:
         )
         table.add_row("majority", f"{levels['majority']:.3f}", "each slot's most frequent action")
         console.print(table)
-        by_step = levels["memoryless_own_by_step"]
-        console.print(
-            "memoryless (own view) by step of the episode: "
-            + " ".join("-" if v is None else f"{v:.2f}" for v in by_step)
-        )
+        for key, what in (("own", "own view"), ("own2", "own view, 2 steps")):
+            console.print(
+                f"memoryless ({what}) by step of the episode: "
+                + " ".join(
+                    "-" if v is None else f"{v:.2f}" for v in levels[f"memoryless_{key}_by_step"]
+                )
+            )
         sampled = set(levels["sampled"])
         console.print(
             "member ceilings: "

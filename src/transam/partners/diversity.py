@@ -375,8 +375,8 @@ def action_levels(
     """The ceiling and the memoryless levels of ``env``'s population (module docstring):
     {"ceiling", "members", "sampled", "memoryless" (from the partner's own observation),
     "memoryless_own" (from the controlled agent's current observation), "memoryless_own_by_step"
-    (the same per timestep), "memoryless_own2" (from its current and previous ones),
-    "majority", "steps"}."""
+    (the same per timestep), "memoryless_own2" and "memoryless_own2_by_step" (from its
+    current and previous ones), "majority", "steps"}."""
     cfg = cfg or LevelsConfig()
     steps = collect_partner_steps(env, cfg.episodes_per_team, cfg.seed, controlled)
     num_actions = env.spec.other_num_actions
@@ -390,6 +390,7 @@ def action_levels(
         "memoryless_own": own["accuracy"],
         "memoryless_own_by_step": own["by_step"],
         "memoryless_own2": own2["accuracy"],
+        "memoryless_own2_by_step": own2["by_step"],
         "majority": memoryless["majority"],
         "steps": int(steps.live.sum()) * steps.obs.shape[2],
     }
