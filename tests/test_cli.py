@@ -59,6 +59,10 @@ def test_bad_values_are_rejected_with_the_valid_choices(
         main(["partners", "diversity", "spread", "--population", "/nope", "--record"])
     with pytest.raises(SystemExit, match="--agent landmark is a Spread rule; pass ENV spread"):
         main(["partners", "diversity", "tag", "--agent", "landmark"])
+    with pytest.raises(SystemExit, match=r"--levels-episodes must be >= 2 .* got 1"):
+        main(["partners", "diversity", "spread", "--levels-episodes", "1"])
+    with pytest.raises(SystemExit, match="--levels-steps must be >= 1, got 0"):
+        main(["partners", "diversity", "spread", "--levels-steps", "0"])
     with pytest.raises(SystemExit, match="--agent landmark takes no --record"):
         main(["partners", "diversity", "spread", "--agent", "landmark", "--record"])
     with pytest.raises(SystemExit, match="--episodes must be at least 1, got 0"):

@@ -771,8 +771,16 @@ class PartnersDiversity:
     the landmark rule, to see how much the levels depend on the states it visits"""
     window: int = 10  # steps per classifier sample
     record: bool = False  # store the results in the shipped manifest (docs/partners.md quotes it)
+    levels_episodes: int | None = None
+    """episodes per team for the accuracy levels (default: LevelsConfig's 64). The levels are
+    fits of an MLP, so lower bounds: more data (and --levels-steps) raise them, a lot on the
+    authors' Spread population (docs/results/parity/README.md)"""
+    levels_steps: int | None = None
+    """training steps of the levels' MLPs, batch 256 (default: LevelsConfig's 2000)"""
 
     def run(self) -> None:
+        import dataclasses
+
         from rich.markup import escape
 
         from transam.compose import make_env
@@ -829,7 +837,17 @@ class PartnersDiversity:
             f"{acc['local']:.3f}, "
             f"chance {acc['chance']:.3f} ({acc['teams']} teams, window {self.window})"
         )
-        lv_cfg = LevelsConfig()
+        given = {"episodes_per_team": self.levels_episodes, "train_steps": self.levels_steps}
+        if self.levels_steps is not None:
+            _check_positive(levels_steps=self.levels_steps)
+        if self.levels_episodes is not None and self.levels_episodes < 2:
+            raise SystemExit(
+                "error: --levels-episodes must be >= 2 (every 4th episode of a team is held "
+                f"out to test), got {self.levels_episodes}"
+            )
+        lv_cfg = dataclasses.replace(
+            LevelsConfig(), **{k: v for k, v in given.items() if v is not None}
+        )
         levels = action_levels(env, lv_cfg, agent)
         table = Table(title=f"{self.env} {split}: partners' action-accuracy levels")
         table.add_column("level")
