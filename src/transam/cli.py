@@ -772,11 +772,11 @@ class PartnersDiversity:
     window: int = 10  # steps per classifier sample
     record: bool = False  # store the results in the shipped manifest (docs/partners.md quotes it)
     levels_episodes: int | None = None
-    """episodes per team for the accuracy levels (default: LevelsConfig's 64). The levels are
-    fits of an MLP, so lower bounds: more data (and --levels-steps) raise them, a lot on the
-    authors' Spread population (docs/results/parity/README.md)"""
+    """episodes per team for the accuracy levels (default: LevelsConfig's 1024). The levels are
+    fits of an MLP, so lower bounds: less data (and fewer --levels-steps) lower them, a lot on
+    Spread (docs/results/parity/README.md)"""
     levels_steps: int | None = None
-    """training steps of the levels' MLPs, batch 256 (default: LevelsConfig's 2000)"""
+    """training steps of the levels' MLPs, batch 256 (default: LevelsConfig's 20,000)"""
 
     def run(self) -> None:
         import dataclasses

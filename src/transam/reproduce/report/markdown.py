@@ -136,6 +136,7 @@ def _levels_md(table: Table, levels: dict[str, dict[str, Any] | None]) -> list[s
         ("action_ceiling", "ceiling E[max π(a|o)]"),
         ("memoryless_accuracy", "memoryless, team-agnostic"),
         ("memoryless_own_accuracy", "memoryless, controlled agent's view"),
+        ("memoryless_own2_accuracy", "the same from two steps (partners' velocities)"),
         ("majority_rate", "majority action"),
     ):
         cells = [
@@ -159,9 +160,11 @@ def _levels_md(table: Table, levels: dict[str, dict[str, Any] | None]) -> list[s
         "predictor can expect more); the *memoryless* level is an MLP's held-out accuracy at "
         "predicting a partner's action from that partner's current observation alone, pooled "
         "over all teams (no team, no history), and the same from the controlled agent's current "
-        "observation (what an agent model has at one step without its history); *majority* is "
-        "the most frequent action's rate. "
-        "A model at the memoryless level has learned nothing about whom it plays with."
+        "observation (what an agent model has at one step without its history), and from its "
+        "current and previous observations (the partners' velocities readable); *majority* is "
+        "the most frequent action's rate. The levels are fits, so lower bounds. "
+        "A model at the memoryless levels has learned nothing about whom it plays with: above "
+        "the one-step level but not the two-step one, it may have learned only the state."
         + (f" Measured on population digests: {digests}." if digests else ""),
         "",
         *_md_table(["", *envs], rows),

@@ -77,6 +77,7 @@ def partner_levels(envs: list[str], split: str = "default") -> dict[str, dict[st
         keep = (
             *LEVEL_KEYS,
             "memoryless_own_accuracy",
+            "memoryless_own2_accuracy",
             aggregate.MEMORYLESS_BY_STEP,
             "population_digest",
             "measured_by",
