@@ -374,6 +374,9 @@ def test_the_demo_shows_each_shipped_run_beside_random_play_and_the_levels(
     assert recorded is not None
     level = recorded["memoryless_own_accuracy_by_step"]
     assert re.search(rf"memoryless\s*│\s*{level[0]:.2f}\s*│", text)
+    level2 = recorded["memoryless_own2_accuracy_by_step"]  # and the two-step level beneath
+    assert re.search(rf"2 steps\s*│\s*{level2[0]:.2f}\s*│", text)
+    assert f"{recorded['memoryless_own2_accuracy']:.3f}" in text
     assert "spread-liam: how it trained" in text  # budgets and settings differ between runs
     res = json.loads((tmp_path / "runs/pretrained/spread-liam/eval_train.json").read_text())
     assert f"{res['return']['mean']:.4g}" in text

@@ -331,8 +331,10 @@ def _print_showcase(env: str, episodes: int) -> None:
         caption="vs random: return minus the random agent's on the same episodes (same "
         "partners and starts), ± its standard error; accuracy: of the partners' actions, "
         "predicted at the newest position from the agent's own trajectory; memoryless: an MLP "
-        "trained to predict them from the agent's current observation alone (the population's "
-        "recorded level)",
+        "trained to predict them from the agent's current observation alone, or from its "
+        "current and previous ones (2 steps: the partners' velocities readable), pooled over "
+        "teams (the population's recorded levels); a model above them has learned whom it "
+        "plays with",
     )
     for col in ("agent", "steps", "return", "± s.e.", "vs random", "accuracy"):
         table.add_column(col, justify="right" if col != "agent" else "left")
@@ -350,28 +352,37 @@ def _print_showcase(env: str, episodes: int) -> None:
     if shown.levels:
         own = shown.levels["memoryless_own_accuracy"]
         table.add_row("memoryless (own view)", "-", "-", "-", "-", f"{own:.3f}")
+        own2 = shown.levels.get("memoryless_own2_accuracy")
+        if own2 is not None:
+            table.add_row("memoryless, 2 steps", "-", "-", "-", "-", f"{own2:.3f}")
         table.add_row("ceiling", "-", "-", "-", "-", f"{shown.levels['action_ceiling']:.3f}")
     console.print(table)
     for name in shown.runs:  # how each was trained: budgets and settings differ
         summary = read_card(pretrained_dir(name)).get("summary")
         if summary:
             console.print(f"[bold]{name}[/bold]: {summary}")
-    level = (shown.levels or {}).get("memoryless_own_accuracy_by_step") or []
+    levels = shown.levels or {}
+    by_step = {
+        "memoryless": levels.get("memoryless_own_accuracy_by_step") or [],
+        "2 steps": levels.get("memoryless_own2_accuracy_by_step") or [],
+    }
     for name, res in shown.runs.items():
         curve = accuracy_by_step(res)
         if curve:
             steps = Table(
                 title=f"{name}: partner-action accuracy by step of the episode",
-                caption="memoryless: the population's recorded level at that step (random "
-                "controlled agent); early steps are easier to predict without history",
+                caption="memoryless: the population's recorded level at that step from the "
+                "agent's current observation (2 steps: and its previous one), random "
+                "controlled agent; early steps are easier to predict without history",
             )
             steps.add_column("t")
             for t, _ in curve:
                 steps.add_column(str(t), justify="right")
             steps.add_row("accuracy", *(f"{a:.2f}" for _, a in curve))
-            if level:
-                at = [level[t] if t < len(level) else None for t, _ in curve]
-                steps.add_row("memoryless", *("-" if v is None else f"{v:.2f}" for v in at))
+            for label, level in by_step.items():
+                if level:
+                    at = [level[t] if t < len(level) else None for t, _ in curve]
+                    steps.add_row(label, *("-" if v is None else f"{v:.2f}" for v in at))
             console.print(steps)
         console.print(f"figure: {output_dir(name) / 'eval_train.png'}")
 

@@ -79,6 +79,7 @@ def partner_levels(envs: list[str], split: str = "default") -> dict[str, dict[st
             "memoryless_own_accuracy",
             "memoryless_own2_accuracy",
             aggregate.MEMORYLESS_BY_STEP,
+            "memoryless_own2_accuracy_by_step",
             "population_digest",
             "measured_by",
         )
