@@ -783,9 +783,9 @@ class PartnersDiversity:
     window: int = 10  # steps per classifier sample
     record: bool = False  # store the results in the shipped manifest (docs/partners.md quotes it)
     levels_episodes: int | None = None
-    """episodes per team for the accuracy levels (default: LevelsConfig's 1024). The levels are
-    fits of an MLP, so lower bounds: less data (and fewer --levels-steps) lower them, a lot on
-    Spread (docs/results/parity/README.md)"""
+    """episodes per team for the accuracy levels (default: LevelsConfig's 25,600 steps' worth,
+    1,024 on Spread). The levels are fits of an MLP, so lower bounds: less data (and fewer
+    --levels-steps) lower them, a lot on Spread (docs/results/parity/README.md)"""
     levels_steps: int | None = None
     """training steps of the levels' MLPs, batch 256 (default: LevelsConfig's 20,000)"""
 
@@ -898,7 +898,7 @@ class PartnersDiversity:
                 f"{n} {v:.3f}" + ("*" if n in sampled else "") for n, v in levels["members"].items()
             )
             + f" (* measured by sampling act {lv_cfg.samples}x per obs; others from their "
-            f"probabilities); {lv_cfg.episodes_per_team} episodes per team, {levels['steps']:,} "
+            f"probabilities); {levels['episodes_per_team']} episodes per team, {levels['steps']:,} "
             f"partner steps, {self.agent} controlled agent"
         )
         if self.record:

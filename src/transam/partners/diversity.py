@@ -195,18 +195,26 @@ def cross_play(env: str, members: list[Member], episodes: int = 16) -> np.ndarra
 class LevelsConfig:
     """Settings of :func:`action_levels`."""
 
-    episodes_per_team: int = 1024
-    """whole episodes per team (3/4 train the memoryless classifier, 1/4 test it). The levels
-    are fits, so lower bounds: with 64 episodes and 2,000 steps (the settings until
-    2026-12-02) they read 0.08-0.13 lower on Spread than with these (e.g. the authors'
-    population, own view 0.39 against 0.50, two steps 0.52 against 0.65), and these still
-    rise a little with more steps"""
+    steps_per_team: int = 25_600
+    """env steps of whole episodes per team (3/4 train the memoryless classifier, 1/4 test
+    it): 1,024 episodes of Spread, 64 of Overcooked. The levels are fits, so lower bounds: with
+    64 Spread episodes and 2,000 steps (the settings until 2026-12-02) they read 0.08-0.13
+    lower than with these (e.g. the authors' population, own view 0.39 against 0.50, two
+    steps 0.52 against 0.65), and these still rise a little with more steps"""
+    episodes_per_team: int | None = None
+    """whole episodes per team instead of ``steps_per_team``'s (at least 4)"""
     samples: int = 64
     """draws of ``act`` per observation for a member without declared probabilities"""
     hidden: int = 128
     train_steps: int = 20_000
     lr: float = 1e-3
     seed: int = 0
+
+    def episodes(self, episode_len: int) -> int:
+        """Episodes per team for a game of ``episode_len`` steps."""
+        if self.episodes_per_team is not None:
+            return self.episodes_per_team
+        return max(4, -(-self.steps_per_team // episode_len))
 
 
 @dataclass(frozen=True)
@@ -382,7 +390,8 @@ def action_levels(
     (the same per timestep), "memoryless_own2" and "memoryless_own2_by_step" (from its
     current and previous ones), "majority", "steps"}."""
     cfg = cfg or LevelsConfig()
-    steps = collect_partner_steps(env, cfg.episodes_per_team, cfg.seed, controlled)
+    episodes = cfg.episodes(env.spec.episode_len)
+    steps = collect_partner_steps(env, episodes, cfg.seed, controlled)
     num_actions = env.spec.other_num_actions
     ceiling = action_ceiling(env.population, steps, num_actions, cfg.samples, cfg.seed)
     memoryless = memoryless_accuracy(steps, num_actions, cfg)
@@ -397,6 +406,7 @@ def action_levels(
         "memoryless_own2_by_step": own2["by_step"],
         "majority": memoryless["majority"],
         "steps": int(steps.live.sum()) * steps.obs.shape[2],
+        "episodes_per_team": episodes,
     }
 
 
@@ -432,7 +442,7 @@ def diversity_record(
         "majority_rate": round(levels["majority"], 4),
         "member_ceilings": {n: round(v, 4) for n, v in levels["members"].items()},
         "ceiling_sampled": levels["sampled"],
-        "levels_settings": asdict(lv_cfg),
+        "levels_settings": {**asdict(lv_cfg), "episodes_per_team": levels["episodes_per_team"]},
         "measured_by": f"transam partners diversity {env}" + (" --heldout" if heldout else ""),
         "population_digest": learned.digest(env, split),
     }
