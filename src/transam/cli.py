@@ -812,6 +812,13 @@ class PartnersDiversity:
                 "manifest: it takes none of --heldout, --record, and not both --heuristic and "
                 "--population"
             )
+        if self.levels_steps is not None:
+            _check_positive(levels_steps=self.levels_steps)
+        if self.levels_episodes is not None and self.levels_episodes < 2:
+            raise SystemExit(
+                "error: --levels-episodes must be >= 2 (every 4th episode of a team is held "
+                f"out to test), got {self.levels_episodes}"
+            )
         agent = _controlled_agent(self.agent, (self.env,), "ENV")
         if agent is not None and self.record:
             raise SystemExit(
@@ -849,13 +856,6 @@ class PartnersDiversity:
             f"chance {acc['chance']:.3f} ({acc['teams']} teams, window {self.window})"
         )
         given = {"episodes_per_team": self.levels_episodes, "train_steps": self.levels_steps}
-        if self.levels_steps is not None:
-            _check_positive(levels_steps=self.levels_steps)
-        if self.levels_episodes is not None and self.levels_episodes < 2:
-            raise SystemExit(
-                "error: --levels-episodes must be >= 2 (every 4th episode of a team is held "
-                f"out to test), got {self.levels_episodes}"
-            )
         lv_cfg = dataclasses.replace(
             LevelsConfig(), **{k: v for k, v in given.items() if v is not None}
         )
