@@ -10,7 +10,7 @@ import sys
 import time
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import tyro
 from rich.console import Console
@@ -20,6 +20,9 @@ from transam.compose import PartnerChoice
 from transam.registry import PAPER_ENVS, PAPER_METHODS, EnvName, MethodName
 from transam.train.config import ConfigError, TrainConfig
 from transam.train.presets import PRESET_NAMES
+
+if TYPE_CHECKING:
+    from transam.envs.population import PolicyFn
 
 PresetName = Literal["none", "authors", "2026-11"]
 
@@ -204,7 +207,7 @@ def _envs_for(partners: str, envs: tuple[EnvName, ...]) -> tuple[str, ...]:
     return (made_for,)
 
 
-def _controlled_agent(agent: str, envs: tuple[str, ...], flag: str) -> Any:
+def _controlled_agent(agent: str, envs: tuple[str, ...], flag: str) -> PolicyFn | None:
     """The controlled agent's policy of ``--agent`` (None: uniformly random), checked against
     the envs it is to play (``flag`` names the option that chose them)."""
     if agent == "random":
