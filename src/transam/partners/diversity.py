@@ -410,6 +410,10 @@ def action_levels(
     }
 
 
+def _rounded(by_step: list[float | None]) -> list[float | None]:
+    return [None if v is None else round(v, 4) for v in by_step]
+
+
 def diversity_record(
     env: str,
     heldout: bool,
@@ -432,13 +436,9 @@ def diversity_record(
         "action_ceiling": round(levels["ceiling"], 4),
         "memoryless_accuracy": round(levels["memoryless"], 4),
         "memoryless_own_accuracy": round(levels["memoryless_own"], 4),
-        "memoryless_own_accuracy_by_step": [
-            None if v is None else round(v, 4) for v in levels["memoryless_own_by_step"]
-        ],
+        "memoryless_own_accuracy_by_step": _rounded(levels["memoryless_own_by_step"]),
         "memoryless_own2_accuracy": round(levels["memoryless_own2"], 4),
-        "memoryless_own2_accuracy_by_step": [
-            None if v is None else round(v, 4) for v in levels["memoryless_own2_by_step"]
-        ],
+        "memoryless_own2_accuracy_by_step": _rounded(levels["memoryless_own2_by_step"]),
         "majority_rate": round(levels["majority"], 4),
         "member_ceilings": {n: round(v, 4) for n, v in levels["members"].items()},
         "ceiling_sampled": levels["sampled"],
