@@ -14,6 +14,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+import jax
 import numpy as np
 import pytest
 
@@ -28,6 +29,7 @@ from transam.evaluation.final import (
 )
 from transam.evaluation.probe import linear_probe, pca_2d, stratified_split
 from transam.evaluation.weights import export_run
+from transam.models.base import ACC_NEWEST
 from transam.partners import learned
 from transam.reproduce import grid
 from transam.reproduce.report.results import partner_levels
@@ -259,7 +261,6 @@ def test_a_run_played_from_given_starts_is_its_evaluation_on_those_episodes(
 ) -> None:
     """Starts taken from the resets ``evaluate_run`` plays with seed 2 give exactly its
     per-episode returns; another seed then samples other actions on the same starts."""
-    import jax
 
     from transam.train.programs import env_and_model
 
@@ -283,6 +284,45 @@ def test_a_run_played_from_given_starts_is_its_evaluation_on_those_episodes(
     assert "group 1" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="--starts plays the run's own partners"):
         Evaluate(str(run_dir), starts=str(path), partners="heldout").run()
+
+
+def test_no_dropout_changes_only_the_acting_and_keeps_the_run_evaluation(
+    run_dir: Path, result: dict[str, Any], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--no-dropout``: the shipped TransAM (dropout in its encoder, act_dropout on) acts
+    without it into eval_train-nodropout.*, beside its own evaluation, which it leaves as it
+    was; for LIAM (no dropout) it changes no number and says so."""
+    name = "spread-transam"
+    base = evaluate_run(name, EPISODES, seed=3, out=tmp_path)
+    on_disk = evaluation_path(tmp_path, "train").read_text()
+    off = evaluate_run(name, EPISODES, seed=3, out=tmp_path, dropout=False)
+    assert (base["act_dropout"], off["act_dropout"]) == (True, False)
+    assert off[ACC_NEWEST] != base[ACC_NEWEST] and off["probe"] != base["probe"]
+    assert any("without the agent model's dropout" in n for n in off["notes"]), off["notes"]
+    assert evaluation_path(tmp_path, "train").read_text() == on_disk  # untouched
+    assert json.loads(evaluation_path(tmp_path, "train", dropout=False).read_text()) == off
+    assert (tmp_path / "eval_train-nodropout_pca.npz").exists()
+    assert evaluate_run(name, EPISODES, seed=3, out=tmp_path, dropout=False) == off
+
+    env = make_env("spread")
+    team = balanced_partners(EPISODES, env.num_partners)
+    states, _ = jax.vmap(env.reset)(jax.random.split(jax.random.key(5), EPISODES), team)
+    starts = tmp_path / "theirs.npz"
+    np.savez(starts, positions=np.asarray(states.game.p_pos), team=team, group=team % 2)
+    played = evaluate_starts(name, starts, seed=3, out=tmp_path, dropout=False)
+    assert played["act_dropout"] is False
+    assert (tmp_path / "eval_starts-theirs-nodropout.json").exists()
+    assert not (tmp_path / "eval_starts-theirs.json").exists()
+
+    liam = tmp_path / "liam"
+    shutil.copytree(run_dir, liam)
+    same = evaluate_run(liam, episodes=EPISODES, dropout=False)
+    for key in ("return", ACC_NEWEST, "obs_mse", "probe", "per_step"):
+        assert same[key] == result[key], key
+    assert same["act_dropout"] is result["act_dropout"] is False
+    assert any("changes nothing here: liam" in n for n in same["notes"]), same["notes"]
+    Evaluate(str(liam), episodes=EPISODES, no_dropout=True).run()
+    assert "eval_train-nodropout.json" in capsys.readouterr().out.replace("\n", "")
 
 
 def test_nam_has_no_decoder_metrics_and_no_probe(smoke_grid: Path, tmp_path: Path) -> None:

@@ -502,6 +502,10 @@ class Evaluate:
     """instead, play the episodes of a starts file (given start positions and partner teams of
     the run's population, e.g. another codebase's evaluation episodes; MPE games; format in
     transam.envs.starts) and write eval_starts-STEM.json (--episodes and --partners unused)"""
+    no_dropout: bool = False
+    """act without the agent model's dropout (the run acted with it, as the authors'
+    evaluation does): reads what the model knows rather than what its noisy acting sees;
+    writes eval_PARTNERS-nodropout.* beside the run's own evaluation"""
 
     def run(self) -> None:
         from transam.evaluation.final import EVAL_METRICS, evaluate_run, output_dir
@@ -513,8 +517,15 @@ class Evaluate:
             self._run_starts(self.starts)
             return
         dest = output_dir(self.run_dir, self.out)
+        dropout = not self.no_dropout
         res = evaluate_run(
-            self.run_dir, self.episodes, self.partners, self.checkpoint, self.seed, self.out
+            self.run_dir,
+            self.episodes,
+            self.partners,
+            self.checkpoint,
+            self.seed,
+            self.out,
+            dropout,
         )
         table = Table(
             title=f"{res['env']}/{res['method']} seed {res['seed']}, {res['checkpoint']} "
@@ -533,10 +544,10 @@ class Evaluate:
         console.print(table)
         for note in res["notes"]:
             console.print(f"note: {note}")
-        path = evaluation_path(dest, self.partners)
+        path = evaluation_path(dest, self.partners, dropout)
         console.print(f"wrote {path}, {path.with_suffix('.png')}")
         if "pca" in res:
-            console.print(f"wrote {projection_path(dest, self.partners)}")
+            console.print(f"wrote {projection_path(dest, self.partners, dropout)}")
 
     def _run_starts(self, starts: str) -> None:
         from transam.evaluation.final import EVAL_METRICS, evaluate_starts, output_dir
@@ -547,7 +558,8 @@ class Evaluate:
                 f"error: --starts plays the run's own partners (its team indices); got "
                 f"--partners {self.partners}"
             )
-        res = evaluate_starts(self.run_dir, starts, self.checkpoint, self.seed, self.out)
+        dropout = not self.no_dropout
+        res = evaluate_starts(self.run_dir, starts, self.checkpoint, self.seed, self.out, dropout)
         table = Table(
             title=f"{res['env']}/{res['method']} seed {res['seed']}, {res['checkpoint']} "
             f"(step {res['step']:,}), the {res['episodes']} episodes of {starts}"
@@ -565,7 +577,8 @@ class Evaluate:
         console.print(table)
         for note in res["notes"]:
             console.print(f"note: {note}")
-        console.print(f"wrote {starts_evaluation_path(output_dir(self.run_dir, self.out), starts)}")
+        dest = output_dir(self.run_dir, self.out)
+        console.print(f"wrote {starts_evaluation_path(dest, starts, dropout)}")
 
 
 @dataclass

@@ -367,27 +367,37 @@ def write_final(out: Path, finals: list[dict[str, Any]]) -> None:
 # ---------------------------------------------------------------- evaluation outputs
 
 
-def evaluation_label(partners: str) -> str:
+NO_DROPOUT_SUFFIX = "-nodropout"
+"""appended to an evaluation's output names when it acted without the agent model's dropout
+(``transam evaluate --no-dropout``), so that it never overwrites the run's own evaluation"""
+
+
+def evaluation_label(partners: str, dropout: bool = True) -> str:
     """The name part of ``partners``' output files: ``train``, ``heldout``, or ``pop-NAME``
-    for a population directory NAME (characters outside ``[A-Za-z0-9_.-]`` become ``_``)."""
-    if partners in EVAL_PARTNERS:
-        return partners
-    return "pop-" + re.sub(r"[^A-Za-z0-9_.-]", "_", Path(partners).resolve().name)
+    for a population directory NAME (characters outside ``[A-Za-z0-9_.-]`` become ``_``),
+    followed by :data:`NO_DROPOUT_SUFFIX` without ``dropout``."""
+    label = (
+        partners
+        if partners in EVAL_PARTNERS
+        else ("pop-" + re.sub(r"[^A-Za-z0-9_.-]", "_", Path(partners).resolve().name))
+    )
+    return label if dropout else label + NO_DROPOUT_SUFFIX
 
 
-def evaluation_path(run_dir: str | Path, partners: str) -> Path:
+def evaluation_path(run_dir: str | Path, partners: str, dropout: bool = True) -> Path:
     """Where ``transam evaluate`` writes its JSON (the figure, ``.png``, sits beside it)."""
-    return Path(run_dir) / f"eval_{evaluation_label(partners)}.json"
+    return Path(run_dir) / f"eval_{evaluation_label(partners, dropout)}.json"
 
 
-def starts_evaluation_path(run_dir: str | Path, starts: str | Path) -> Path:
+def starts_evaluation_path(run_dir: str | Path, starts: str | Path, dropout: bool = True) -> Path:
     """Where ``transam evaluate --starts FILE`` writes its JSON."""
-    return Path(run_dir) / f"eval_starts-{Path(starts).stem}.json"
+    suffix = "" if dropout else NO_DROPOUT_SUFFIX
+    return Path(run_dir) / f"eval_starts-{Path(starts).stem}{suffix}.json"
 
 
-def projection_path(run_dir: str | Path, partners: str) -> Path:
+def projection_path(run_dir: str | Path, partners: str, dropout: bool = True) -> Path:
     """Where ``transam evaluate`` writes the 2-D projection of the embeddings."""
-    return Path(run_dir) / f"eval_{evaluation_label(partners)}_pca.npz"
+    return Path(run_dir) / f"eval_{evaluation_label(partners, dropout)}_pca.npz"
 
 
 # ---------------------------------------------------------------- checkpoints

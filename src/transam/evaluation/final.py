@@ -35,7 +35,8 @@ partner choice it mapped to), ``population_name``, ``trained_partners``, ``popul
 and ``trained_population_digest`` (the shipped population's fingerprint now and the run's
 partners.json's; None for scripted partners or runs older than that file), ``checkpoint`` (path
 relative to the run directory: the named one, or the newest that verifies, any newer one that
-does not being named in ``notes``), ``step``, ``episodes``, ``greedy``, ``return`` {mean, std},
+does not being named in ``notes``), ``step``, ``episodes``, ``greedy``, ``act_dropout``
+(whether the agent model acted with its dropout), ``return`` {mean, std},
 the :data:`EVAL_METRICS` the model predicts, ``policy_entropy`` (the policy's mean entropy
 per step, nats), ``action_frequency`` [A] (the share of each of the controlled agent's actions
 over the episodes' steps; on the MPE games action 0 is "no move"), ``per_partner_return``
@@ -150,13 +151,16 @@ def evaluate_starts(
     checkpoint: str | int | None = None,
     seed: int = 0,
     out: str | Path | None = None,
+    dropout: bool = True,
 ) -> dict[str, Any]:
     """Play a run's checkpoint on the episodes of a starts file (:mod:`transam.envs.starts`:
     given start positions and partner teams, e.g. another codebase's evaluation episodes),
     against the run's own partner population, and write ``eval_starts-STEM.json`` into
     :func:`output_dir`: ``return`` {mean, std, se}, ``per_group`` {group: mean return}, the
     per-episode ``returns``, ``team`` and ``group``, ``policy_entropy`` and the agent-modeling
-    metrics the model predicts. Actions are sampled as in every evaluation (``eval.greedy``)."""
+    metrics the model predicts. Actions are sampled as in every evaluation (``eval.greedy``).
+    Without ``dropout`` the agent model acts without its dropout
+    (``eval_starts-STEM-nodropout.json``)."""
     from transam.envs.starts import load_starts
     from transam.train.programs import env_and_model, program_key
 
@@ -169,7 +173,8 @@ def evaluate_starts(
     with _locked(run_dir, dest, "transam evaluate --starts"):
         notes: list[str] = []
         w = restore_weights(config, run_dir, checkpoint, notes)
-        run = _program(program_key(config), st.episodes)
+        acting = _acting(config, dropout, notes)
+        run = _program(program_key(acting), st.episodes)
         ep = jax.device_get(
             run(
                 w.policy_params,
@@ -190,6 +195,7 @@ def evaluate_starts(
             "step": w.step,
             "episodes": st.episodes,
             "greedy": config.eval.greedy,
+            "act_dropout": acting.acting_dropout,
             "return": {
                 "mean": float(returns.mean()),
                 "std": float(returns.std()),
@@ -206,7 +212,7 @@ def evaluate_starts(
         res["team"] = [int(t) for t in st.team]
         res["group"] = [int(g) for g in st.group]
         res["notes"] = notes
-        write_json(starts_evaluation_path(dest, starts), res)
+        write_json(starts_evaluation_path(dest, starts, dropout), res)
     return res
 
 
@@ -233,12 +239,14 @@ def evaluate_run(
     checkpoint: str | int | None = None,
     seed: int = 0,
     out: str | Path | None = None,
+    dropout: bool = True,
 ) -> dict[str, Any]:
     """Evaluate a run's checkpoint (or a pretrained run: a directory, or the name of a shipped
     one) on ``episodes`` episodes with its training partners or held-out ones; write
     eval_{partners}.json/.png/_pca.npz into :func:`output_dir` and return the JSON's contents.
     Holds that directory's lock meanwhile; without ``checkpoint``, uses the newest checkpoint
-    that verifies and notes each newer one that does not."""
+    that verifies and notes each newer one that does not. Without ``dropout`` the agent model
+    acts without its dropout, and the outputs are named ``eval_{partners}-nodropout.*``."""
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 2:
         raise ConfigError(f"episodes must be an integer >= 2, got {episodes!r}")
     _check_seed(seed)
@@ -247,12 +255,31 @@ def evaluate_run(
     config = load_run_config(run_dir)
     population_for(config.partners, partners)  # checks ``partners``
     with _locked(run_dir, dest, "transam evaluate") as top:
-        return _evaluate_locked(run_dir, top, dest, config, episodes, partners, checkpoint, seed)
+        return _evaluate_locked(
+            run_dir, top, dest, config, episodes, partners, checkpoint, seed, dropout
+        )
 
 
 def _check_seed(seed: Any) -> None:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
+
+
+def _acting(config: TrainConfig, dropout: bool, notes: list[str]) -> TrainConfig:
+    """The run's config to play with: as trained, or (``dropout`` False) with the agent model's
+    dropout off while acting. The reference keeps dropout on in its evaluation, which costs
+    the TransAM family some accuracy; without it the evaluation reads what the model knows.
+    Only the acting changes (the z the policy sees and the decoder's predictions)."""
+    if dropout:
+        return config
+    if not config.acting_dropout:
+        notes.append(
+            f"--no-dropout changes nothing here: {config.method} with a2c.act_dropout "
+            f"{config.a2c.act_dropout} already acts without the agent model's dropout"
+        )
+        return config
+    notes.append("played without the agent model's dropout (--no-dropout); the run acted with it")
+    return dataclasses.replace(config, a2c=dataclasses.replace(config.a2c, act_dropout=False))
 
 
 @contextlib.contextmanager
@@ -275,6 +302,7 @@ def _evaluate_locked(
     partners: str,
     checkpoint: str | int | None,
     seed: int,
+    dropout: bool,
 ) -> dict[str, Any]:
     from transam.partners.learned import population_digest
     from transam.train.programs import env_and_model, program_key
@@ -283,7 +311,7 @@ def _evaluate_locked(
     notes: list[str] = []
     w = restore_weights(config, run_dir, checkpoint, notes)
 
-    eval_config = dataclasses.replace(config, partners=population)
+    eval_config = dataclasses.replace(_acting(config, dropout, notes), partners=population)
     env, model = env_and_model(eval_config)
     teams = env.population.team_names
     partner_ids = balanced_partners(episodes, env.num_partners)
@@ -326,6 +354,7 @@ def _evaluate_locked(
         "step": w.step,
         "episodes": episodes,
         "greedy": config.eval.greedy,
+        "act_dropout": eval_config.acting_dropout,
         "return": {"mean": float(returns.mean()), "std": float(returns.std())},
     }
     per_step: dict[str, Any] = {"cum_return": [float(v) for v in reward.cumsum(0).mean(1)]}
@@ -364,10 +393,10 @@ def _evaluate_locked(
             explained_variance=np.asarray(ratio),
             t=last,
         )
-        write_atomic(projection_path(dest, partners), buf.getvalue())
+        write_atomic(projection_path(dest, partners, dropout), buf.getvalue())
     out["notes"] = notes
 
-    path = evaluation_path(dest, partners)
+    path = evaluation_path(dest, partners, dropout)
     write_json(path, out)
     write_atomic(path.with_suffix(".png"), evaluation_figure(out, teams, labels, pca))
     return out
