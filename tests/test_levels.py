@@ -15,6 +15,7 @@ from transam.partners.diversity import (
     action_ceiling,
     collect_partner_steps,
     memoryless_accuracy,
+    own_window,
 )
 from transam.partners.train import select, select_probs
 
@@ -100,6 +101,9 @@ def test_memoryless_level_of_constructed_populations() -> None:
     assert np.median(own["by_step"]) > 0.8  # 16 test samples a step: single steps vary
     with pytest.raises(ValueError, match="view 'theirs'; valid choices: partner, own, own2"):
         memoryless_accuracy(steps, 5, cfg, view="theirs")
+    for bad in ("own1", "own0", "own02", "ownx"):  # own1 is "own"; no leading zero
+        with pytest.raises(ValueError, match=f"view '{bad}'; valid choices"):
+            memoryless_accuracy(steps, 5, cfg, view=bad)
     # A member that ignores its observation and acts uniformly: about 1/5.
     env = spread_with([("uniform", "uniform"), ("uniform", "uniform")])
     steps = collect_partner_steps(env, episodes_per_team=16, seed=2)  # type: ignore[arg-type]
@@ -158,3 +162,15 @@ def test_partner_steps_with_a_controlled_policy() -> None:
     assert not np.abs(steps.own_obs[:, :, :2]).any()
     steps = collect_partner_steps(env, 2, seed=0)  # type: ignore[arg-type]
     assert np.abs(steps.own_obs[:, :, :2]).any()
+
+
+def test_own_window_is_the_observation_and_its_successive_changes() -> None:
+    """K observations: o_t, then o_t - o_{t-1}, o_{t-1} - o_{t-2}, ..., zero before the
+    episode's start; K=1 is the observation alone, K=2 the "own2" view's features."""
+    own = (np.arange(8, dtype=np.float64).reshape(2, 4, 1)) ** 2  # [E=2, T=4, D=1]
+    np.testing.assert_array_equal(
+        own_window(own, 3)[0], [[0, 0, 0], [1, 1, 0], [4, 3, 1], [9, 5, 3]]
+    )
+    np.testing.assert_array_equal(own_window(own, 3)[1, 0], [16, 0, 0])  # its own episode
+    np.testing.assert_array_equal(own_window(own, 1), own)
+    assert own_window(np.zeros((3, 5, 7)), 5).shape == (3, 5, 35)

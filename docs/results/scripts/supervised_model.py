@@ -25,6 +25,7 @@ import optax
 from transam.evaluation.weights import restore_weights
 from transam.models.base import LocalStep
 from transam.rundir import load_run_config
+from transam.train.a2c import batch_carry, make_optimizers
 from transam.train.programs import env_and_model
 
 
@@ -71,18 +72,10 @@ def main() -> None:
     test_x, test_y = collect(env, args.test_episodes, 2)
     num_train = train_x.obs.shape[0]
 
-    def carry(b: int) -> Any:
-        c = model.init_carry(spec)
-        return jax.tree.map(lambda a: jnp.broadcast_to(a, (b, *a.shape)), c)
-
-    a = config.a2c
-    tx = optax.chain(
-        optax.clip_by_global_norm(a.max_grad_norm),
-        optax.adam(a.model_lr, eps=a.model_adam_eps),
-    )
+    tx = make_optimizers(config)[1]  # the agent model's, as the trainer builds it
 
     def loss(p: Any, xs: Any, ys: Any, key: jax.Array) -> Any:
-        return model.loss(p, carry(xs.obs.shape[1]), xs, ys, key)
+        return model.loss(p, batch_carry(model.init_carry(spec), xs.obs.shape[1]), xs, ys, key)
 
     @jax.jit
     def update(p: Any, o: Any, key: jax.Array, xs: Any, ys: Any) -> tuple[Any, Any, jax.Array]:

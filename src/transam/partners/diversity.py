@@ -32,6 +32,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -328,6 +329,19 @@ def action_ceiling(
     return {"ceiling": float(values[mask].mean()), "members": members, "sampled": sampled}
 
 
+def own_window(own: np.ndarray, k: int) -> np.ndarray:
+    """The controlled agent's last ``k`` observations as features: [E, T, D] -> [E, T, k*D],
+    o_t and the k-1 changes o_{t-j+1} - o_{t-j} between them (a change reaching before the
+    episode's first observation is zero). Changes rather than the observations themselves,
+    which hold the same information, because the MLP learns them far faster."""
+    feats, prev = [own], own
+    for _ in range(1, k):
+        before = np.concatenate([prev[:, :1], prev[:, :-1]], 1)
+        feats.append(prev - before)
+        prev = before
+    return np.concatenate(feats, -1)
+
+
 def memoryless_accuracy(
     steps: PartnerSteps, num_actions: int, cfg: LevelsConfig | None = None, view: str = "partner"
 ) -> dict[str, Any]:
@@ -343,20 +357,21 @@ def memoryless_accuracy(
     information, because the MLP learns it far faster): the partners' velocities, which their
     own observations hold and the agent's one does not, are then readable, so a model above
     ``"own"`` but not above ``"own2"`` may have learned the state and nothing of whom it plays
-    with."""
+    with. ``"ownK"`` (K >= 2): its last K observations (:func:`own_window`), what a model with
+    a K-step window is given."""
     cfg = cfg or LevelsConfig()
     e, t, n, _ = steps.obs.shape
     slot = np.broadcast_to(np.eye(n, dtype=np.float32), (e, t, n, n))
     if view == "partner":
         seen = steps.obs
-    elif view in ("own", "own2"):
-        own = steps.own_obs
-        if view == "own2":
-            before = np.concatenate([own[:, :1], own[:, :-1]], 1)
-            own = np.concatenate([own, own - before], -1)
+    elif view == "own" or re.fullmatch(r"own([2-9]|[1-9]\d+)", view):
+        own = own_window(steps.own_obs, 1 if view == "own" else int(view[3:]))
         seen = np.broadcast_to(own[:, :, None, :], (e, t, n, own.shape[-1]))
     else:
-        raise ValueError(f"unknown view {view!r}; valid choices: partner, own, own2")
+        raise ValueError(
+            f"unknown view {view!r}; valid choices: partner, own, own2 (or ownK, the last K "
+            "observations, K >= 2)"
+        )
     x = np.concatenate([seen, slot], -1)
     test = np.broadcast_to((steps.episode % 4 == 0)[:, None, None], (e, t, n))
     live = np.broadcast_to(steps.live[..., None], (e, t, n))
