@@ -14,8 +14,13 @@
 #                       fixed, and the clock) instead of the preset: outputs in
 #                       runs/deviations-defaults, baseline runs/parity/defaults (parity.sh's run
 #                       of the current defaults), table deviations-final.md
+#   PRESET=none ONLY=model_lr_1e3 docs/results/scripts/deviations.sh
+#                       a candidate (CANDIDATES below: a setting that was never a default) on
+#                       top of the final defaults
 # Re-running resumes unfinished runs and skips finished ones. Overrides as in parity.sh, plus
-# BASELINE (the preset run) and TABLE (output markdown).
+# BASELINE (the preset run) and TABLE (output markdown). Every row's curves are kept beside the
+# table (TABLE with .csv for .md): a row run once stays in the table when later runs of this
+# script select others, and the run directories may then be deleted.
 set -euo pipefail
 
 TRANSAM=${TRANSAM:-transam}
@@ -64,6 +69,11 @@ ROWS=(
   "flax_init|--model.init default"
   "recon_in_rollout|--model.recon-at all"
 )
+# name | flags of a setting that was never a default: a candidate measured against the final
+# defaults only (PRESET=none), and only when named in ONLY
+CANDIDATES=(
+  "model_lr_1e3|--a2c.model-lr 1e-3"
+)
 
 selected() {
   [[ -z "${ONLY:-}" ]] && return 0
@@ -74,7 +84,11 @@ args=()
 if [[ $PRESET != none ]] && selected proper_action_ce && [[ -f "$PARITY/defaults/config.json" ]]; then
   args+=("proper_action_ce (--model.action-loss ce, the defaults)=$PARITY/defaults")
 fi
-for row in "${ROWS[@]}"; do
+candidates=()
+if [[ $PRESET == none && -n "${ONLY:-}" ]]; then
+  candidates=("${CANDIDATES[@]}")
+fi
+for row in "${ROWS[@]}" "${candidates[@]}"; do
   name=${row%%|*}
   flags=${row#*|}
   selected "$name" || continue
@@ -94,7 +108,9 @@ for row in "${ROWS[@]}"; do
   args+=("$name ($flags)=$dir")
 done
 
+# the baseline's curves are kept too: without its run directory, read it from there
+[[ -d $BASELINE || ! -f ${TABLE%.md}.csv ]] || BASELINE=${TABLE%.md}.csv
 label="preset (authors)"
 [[ $PRESET == none ]] && label="final defaults"
 python "$HERE/deviation_table.py" --baseline "$BASELINE" --baseline-label "$label" \
-  --out "$TABLE" "${args[@]}"
+  --out "$TABLE" --curves "${TABLE%.md}.csv" "${args[@]}"
