@@ -241,6 +241,7 @@ def test_settings_are_validated() -> None:
     assert TrainConfig(method="transam").acting_dropout
     assert not TrainConfig(method="nam", a2c=A2CConfig(act_dropout=True)).validate().acting_dropout
     assert not TrainConfig(a2c=A2CConfig(act_dropout=False)).acting_dropout
+    assert not TrainConfig(model=TransAMConfig(dropout=0.0)).acting_dropout  # nothing to drop
     with pytest.raises(ConfigError, match=r"return_mean' needs a2c\.normalize_returns"):
         TrainConfig(a2c=A2CConfig(end_bootstrap="return_mean", normalize_returns=False)).validate()
     with pytest.raises(ConfigError, match=r"a2c\.rollouts_per_collect must be >= 1, got 0"):
@@ -304,6 +305,46 @@ def test_one_rollout_per_collect_is_plain_a2c() -> None:
     np.testing.assert_array_equal(rs1.env_state.pos, rs_roll.env_state.pos)  # type: ignore[attr-defined]
     np.testing.assert_array_equal(rs1.x.t, rs_roll.x.t)
     assert int(rs1.update) == 1
+
+
+def test_further_model_passes_step_the_agent_model_only() -> None:
+    """model_passes = 2: the same joint updates as one pass (policy, environments and key
+    stream unchanged), then one more agent-model-only step per rollout of the collection,
+    which lowers the model's loss on that collection."""
+    env = LongToy()
+    runs = {}
+    for passes in (1, 2):
+        cfg = toy_config({"model_passes": passes, "model_lr": 1e-2}, preset="authors")
+        model = tiny_transam(cfg)
+        rs0 = a2c.init_runner(cfg, env, model, jax.random.key(0))  # type: ignore[arg-type]
+        runs[passes] = jax.jit(a2c.make_update(cfg, env, model))(rs0)  # type: ignore[arg-type]
+    (one, m1), (two, m2) = runs[1], runs[2]
+    for a, b in ((one.policy_params, two.policy_params), (one.env_state, two.env_state)):
+        jax.tree.map(np.testing.assert_array_equal, a, b)
+    np.testing.assert_array_equal(one.key, two.key)
+    assert int(one.model_opt[1][0].count) == 5 and int(two.model_opt[1][0].count) == 10
+    assert "model_loss_last_pass" in m2 and "model_loss_last_pass" not in m1
+    # The collection the update learned from (its keys as make_update draws them).
+    _, k_roll, _ = jax.random.split(jax.random.wrap_key_data(rs0.key), 3)
+    keys = jax.random.split(k_roll, 5)
+    _, col = a2c.make_collect(cfg, env, model)(rs0, keys)  # type: ignore[arg-type]
+
+    def loss(params: Any) -> float:
+        per = [
+            model.loss(
+                params,
+                *jax.tree.map(
+                    lambda a, c=c: a[c], (col.traj.model_carry0, col.traj.x, col.traj.record)
+                ),
+                None,
+            )[0]
+            for c in range(5)
+        ]
+        return float(np.mean(per))
+
+    assert loss(two.model_params) < loss(one.model_params) < loss(rs0.model_params)
+    with pytest.raises(ConfigError, match=r"a2c\.model_passes must be >= 1, got 0"):
+        TrainConfig(a2c=A2CConfig(model_passes=0)).validate()
 
 
 # ------------------------------------------------------------------ losses and targets

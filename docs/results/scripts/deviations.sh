@@ -73,6 +73,7 @@ ROWS=(
 # defaults only (PRESET=none), and only when named in ONLY
 CANDIDATES=(
   "model_lr_1e3|--a2c.model-lr 1e-3"
+  "model_passes_2|--a2c.model-passes 2"
 )
 
 selected() {

@@ -274,8 +274,9 @@ def _acting(config: TrainConfig, dropout: bool, notes: list[str]) -> TrainConfig
         return config
     if not config.acting_dropout:
         notes.append(
-            f"--no-dropout changes nothing here: {config.method} with a2c.act_dropout "
-            f"{config.a2c.act_dropout} already acts without the agent model's dropout"
+            f"--no-dropout changes nothing here: {config.method} already acts without the "
+            f"agent model's dropout (a2c.act_dropout {config.a2c.act_dropout}; a model with "
+            f"dropout: {config.model_has_dropout})"
         )
         return config
     notes.append("played without the agent model's dropout (--no-dropout); the run acted with it")

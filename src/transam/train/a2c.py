@@ -500,9 +500,10 @@ def make_update(
     """One collection and its updates (pure; not jitted): ``rollouts_per_collect`` = C
     rollouts collected with the same parameters (:func:`make_collect`), then C A2C +
     agent-model updates in order, update c on rollout c, each a gradient step of both
-    networks from the parameters the previous one left. C = 1 (the default) is plain A2C:
-    rollout, update. Metrics are means over the C updates (``episodes``, ``return_sum``:
-    sums)."""
+    networks from the parameters the previous one left. C = 1 is plain A2C: rollout, update.
+    With ``model_passes`` P > 1, P - 1 further passes over the C rollouts follow, each an
+    agent-model-only step per rollout. Metrics are means over the C updates (``episodes``,
+    ``return_sum``: sums)."""
     a = config.a2c
     num = a.rollouts_per_collect
     policy = make_policy(config, env)
@@ -515,6 +516,13 @@ def make_update(
     if isinstance(model, TransAM) and model.config.recon_at == "window":
         prior_k = model.config.context - 1  # positions before a rollout get their targets
 
+    def prior_of(records: PartnerRecord, index: jax.Array) -> dict[str, Any]:
+        """The targets of the window positions before rollout ``index`` (recon_at="window")."""
+        if not prior_k:
+            return {}
+        prior, prior_ok = _prior_records(records, index, prior_k)
+        return {"prior": prior, "prior_ok": prior_ok}
+
     def learn(
         rs: RunnerState, col: Collected, key: jax.Array, index: jax.Array, records: PartnerRecord
     ) -> tuple[RunnerState, Metrics]:
@@ -522,9 +530,7 @@ def make_update(
         adv_mean = adv.mean()  # ~0 when the critic is unbiased
         if a.normalize_advantages and a.advantage == "gae":
             adv = (adv - adv_mean) / (adv.std() + 1e-8)
-        prior: dict[str, Any] = {}
-        if prior_k:
-            prior["prior"], prior["prior_ok"] = _prior_records(records, index, prior_k)
+        prior = prior_of(records, index)
         z_keys = None
         if config.acting_dropout:  # the policy's z is recomputed (or back-propagated) with dropout
             z_keys = jax.random.split(jax.random.fold_in(key, 1), traj.x.first.shape[1])
@@ -600,6 +606,21 @@ def make_update(
         )
         return rs, metrics
 
+    def refit(
+        rs: RunnerState, col: Collected, key: jax.Array, index: jax.Array, records: PartnerRecord
+    ) -> tuple[RunnerState, jax.Array]:
+        """A further agent-model-only gradient step on one rollout (``model_passes`` > 1)."""
+        traj = col.traj
+
+        def loss_fn(model_params: Any) -> tuple[jax.Array, Any]:
+            args = (model_params, traj.model_carry0, traj.x, traj.record, key)
+            return model.loss(*args, **prior_of(records, index))
+
+        (loss, _), grads = jax.value_and_grad(loss_fn, has_aux=True)(rs.model_params)
+        upd, model_opt = model_tx.update(grads, rs.model_opt, rs.model_params)
+        model_params = optax.apply_updates(rs.model_params, upd)
+        return dataclasses.replace(rs, model_params=model_params, model_opt=model_opt), loss
+
     def update(rs: RunnerState) -> tuple[RunnerState, Metrics]:
         key, k_roll, k_loss = jax.random.split(jax.random.wrap_key_data(rs.key), 3)
         # One rollout (the default) uses k_roll and k_loss themselves, as before collections.
@@ -613,8 +634,21 @@ def make_update(
             return learn(rs, col, k, index, records)
 
         rs, metrics = jax.lax.scan(body, rs, (collected, loss_keys, jnp.arange(num)))
+        metrics = _reduce(metrics)
+        if a.model_passes > 1:  # each pass: the rollouts again, in order, fresh dropout keys
+            pass_keys = jax.random.split(jax.random.fold_in(k_loss, 2), (a.model_passes - 1, num))
+
+            def one_pass(rs: RunnerState, keys: jax.Array) -> tuple[RunnerState, jax.Array]:
+                def body(rs: RunnerState, inp: tuple[Any, ...]) -> tuple[RunnerState, jax.Array]:
+                    col, k, index = inp
+                    return refit(rs, col, k, index, records)
+
+                return jax.lax.scan(body, rs, (collected, keys, jnp.arange(num)))
+
+            rs, losses = jax.lax.scan(one_pass, rs, pass_keys)
+            metrics["model_loss_last_pass"] = losses[-1].mean()
         rs = dataclasses.replace(rs, key=jax.random.key_data(key))
-        return rs, _reduce(metrics)
+        return rs, metrics
 
     return update
 

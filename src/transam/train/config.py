@@ -65,6 +65,12 @@ class A2CConfig:
     """agent-model Adam learning rate (its own optimiser, never annealed)"""
     model_adam_eps: float = 1e-5
     """agent-model Adam epsilon"""
+    model_passes: int = 1
+    """agent-model gradient steps per collected rollout: the first is the joint update
+    (default, the reference: one opponent-model step per update); each further pass is a
+    model-only step over the collection's rollouts again, in order, after its updates. A
+    deviation to measure (the model's learning is bound by its optimiser steps,
+    docs/notes/2026-12-accuracy-levels.md); no effect for methods without an agent-model loss"""
     max_grad_norm: float = 0.25
     """global gradient-norm clip, applied to each network (policy, agent model) separately"""
     normalize_returns: bool = True
@@ -196,8 +202,13 @@ class TrainConfig:
     @property
     def acting_dropout(self) -> bool:
         """Whether z is computed with dropout on outside the model's own loss: ``act_dropout``
-        and a method whose model has dropout (the registry's ``dropout`` flag)."""
-        return self.a2c.act_dropout and registry.method_entry(self.method).dropout
+        and a method whose model has dropout (the registry's ``dropout`` flag) at a rate > 0."""
+        return self.a2c.act_dropout and self.model_has_dropout
+
+    @property
+    def model_has_dropout(self) -> bool:
+        """The method's agent model applies dropout: a TransAM-family model, rate > 0."""
+        return registry.method_entry(self.method).dropout and self.model.dropout > 0.0
 
     @property
     def z_from_loss_pass(self) -> bool:
@@ -244,14 +255,14 @@ class TrainConfig:
         for name in ("lr", "adam_eps", "model_adam_eps", "max_grad_norm"):
             _positive(f"a2c.{name}", getattr(a, name))
         _at_least("a2c.rollouts_per_collect", a.rollouts_per_collect, 1)
+        _at_least("a2c.model_passes", a.model_passes, 1)
         _at_least("a2c.anneal_steps", a.anneal_steps, 0)
         _choice("a2c.advantage", a.advantage, ("gae", "recomputed"))
         _choice("a2c.value_loss", a.value_loss, ("half_squared", "squared"))
         _choice("a2c.end_bootstrap", a.end_bootstrap, ("zero", "return_mean"))
         _choice("a2c.init", a.init, ("orthogonal", "torch"))
         _choice("a2c.z_pass", a.z_pass, ("shared", "separate"))
-        dropout = registry.method_entry(self.method).dropout and self.model.dropout > 0.0
-        if self.z_from_loss_pass and dropout and not a.act_dropout:
+        if self.z_from_loss_pass and self.model_has_dropout and not a.act_dropout:
             raise ConfigError(
                 "a2c.z_pass 'shared' gives the policy the z of the agent-model loss's pass, "
                 "which has dropout, but a2c.act_dropout is off (z without dropout); use "
@@ -321,6 +332,7 @@ ADDED_SETTINGS: dict[tuple[str, str], Any] = {
     ("a2c", "act_dropout"): False,
     ("a2c", "recompute_z"): False,
     ("a2c", "z_pass"): "separate",
+    ("a2c", "model_passes"): 1,
     ("model", "embed_ln"): True,
     ("model", "init"): "default",
     ("model", "action_loss"): "ce",

@@ -80,6 +80,11 @@ AUTHORS: tuple[Setting, ...] = (
     ),
     Setting("a2c.model_lr", 3e-4, "Args.opponent_learning_rate, never annealed"),
     Setting("a2c.model_adam_eps", 1e-5, "optim.Adam(opponent_model.parameters(), eps=1e-5)"),
+    Setting(
+        "a2c.model_passes",
+        1,
+        "one opponent_optimizer.step() per chunk, in the same loop as the agent's step",
+    ),
     Setting("a2c.max_grad_norm", 0.25, "Args.max_grad_norm, clip_grad_norm_ on each network"),
     # --- the policy
     Setting("a2c.hidden", 128, "Agent: nn.LSTM(obs + 128, 128), fc1 128"),
