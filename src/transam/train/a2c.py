@@ -639,11 +639,8 @@ def make_update(
             pass_keys = jax.random.split(jax.random.fold_in(k_loss, 2), (a.model_passes - 1, num))
 
             def one_pass(rs: RunnerState, keys: jax.Array) -> tuple[RunnerState, jax.Array]:
-                def body(rs: RunnerState, inp: tuple[Any, ...]) -> tuple[RunnerState, jax.Array]:
-                    col, k, index = inp
-                    return refit(rs, col, k, index, records)
-
-                return jax.lax.scan(body, rs, (collected, keys, jnp.arange(num)))
+                xs = (collected, keys, jnp.arange(num))
+                return jax.lax.scan(lambda rs, inp: refit(rs, *inp, records), rs, xs)
 
             rs, losses = jax.lax.scan(one_pass, rs, pass_keys)
             metrics["model_loss_last_pass"] = losses[-1].mean()
