@@ -317,6 +317,61 @@ def test_recon_targets_line_up(env: ControlledEnv, traj: Any) -> None:
     np.testing.assert_allclose(total_last, m_last["obs_mse"] + m_last["action_ce"], rtol=1e-6)
 
 
+@partial(jax.jit, static_argnums=0)
+def loss_with_prior(
+    model: TransAM, params: Any, carry: Any, xs: Any, rec: Any, prior: Any, ok: Any
+) -> Any:
+    return model.rollout_loss(params, carry, xs, rec, None, prior, ok)
+
+
+def test_all_positions_metrics_skip_window_positions_without_targets(
+    env: ControlledEnv, traj: Any
+) -> None:
+    """A rollout that starts mid-episode (a collection that does not line up with episodes):
+    its first windows hold valid steps from before the collection, whose targets the trainer
+    does not have (``prior_ok`` False, records zero-padded). With a zeroed head (logits 0, so
+    argmax 0 = the padding's action; predicted observation 0 = the padding's) the all-positions
+    accuracy and observation error are exactly the fraction of action-0 targets and the mean
+    squared target over the positions that have one, not the padded ones."""
+    xs, rec = traj
+    k, start, stop = TINY.context, 20, 30
+    model = TransAM(env.spec, TINY)
+    params = model.init(jax.random.key(5), env.spec)
+    params = {**params, "head": jax.tree.map(jnp.zeros_like, params["head"])}
+    carry = take(carries_before(model, xs), start)
+    sx, sr = take(xs, slice(start, stop)), take(rec, slice(start, stop))
+    padded = jax.tree.map(lambda r: np.zeros_like(r[: k - 1]), sr)
+    held = take(rec, slice(start - (k - 1), start))
+    valid = np.asarray(newest_and_all(model, params, carry, sx)[0])
+    act, obs = np.asarray(rec.other_actions), np.asarray(rec.other_obs)
+
+    def expected(first: int) -> tuple[float, float]:
+        """Means over the valid positions whose step (of the trajectory) is >= first."""
+        hits, errs = [], []
+        for i in range(stop - start):
+            for pos in range(k):
+                t = start + i + pos - (k - 1)
+                if valid[i, pos] and t >= first:
+                    hits.append(np.mean(act[t] == 0))
+                    errs.append(np.mean(obs[t].astype(np.float32) ** 2))
+        return float(np.mean(hits)), float(np.mean(errs))
+
+    no_prior = np.zeros((k - 1,), bool)
+    _, m = loss_with_prior(model, params, carry, sx, sr, padded, no_prior)
+    acc, err = expected(start)  # only the rollout's own steps have targets
+    assert float(m[ACC_ALL]) == pytest.approx(acc, abs=1e-6)
+    assert float(m[MSE_ALL]) == pytest.approx(err, rel=1e-5)
+    # The padding would have counted as correct actions with no observation error.
+    n_pad = int(sum(valid[i, pos] for i in range(k - 1) for pos in range(k - 1 - i)))
+    assert n_pad > 0 and acc < 1.0
+    # Held prior steps are scored against their own targets.
+    _, m = loss_with_prior(model, params, carry, sx, sr, held, ~no_prior)
+    acc_held, err_held = expected(start - (k - 1))
+    assert float(m[ACC_ALL]) == pytest.approx(acc_held, abs=1e-6)
+    assert float(m[MSE_ALL]) == pytest.approx(err_held, rel=1e-5)
+    assert err_held != pytest.approx(err, rel=1e-3)
+
+
 def test_newest_and_all_positions_accuracy_differ_when_only_older_positions_are_right() -> None:
     """The bidirectional window's look-ahead: older positions right, the newest wrong."""
     actions = jnp.array([[[1, 2], [3, 4], [0, 1]]] * 2)  # [T=2, P=3, N=2]

@@ -721,18 +721,22 @@ class TransAM:
         emb = self._encode(params, win, key)  # [T, K, width]
         z = self._pool(emb, win.valid)  # what embed_rollout gives with this key
         j = jnp.arange(num_steps)[:, None] + jnp.arange(k)[None, :] - (k - 1)
+        # scored: the positions that have a target (valid, and a step whose record the trainer
+        # holds); the metrics average over these whatever recon_at trains.
         if self.config.pool == "mean":  # one decoded embedding per window: [T, 1, width]
             emb, j = z[:, None], jnp.arange(num_steps)[:, None]
-            weight = jnp.ones(j.shape)
+            scored = jnp.ones(j.shape, bool)
         elif self.config.recon_at == "window" and prior is not None:
             assert prior_ok is not None
             targets = jax.tree.map(lambda p, t: jnp.concatenate([p, t]), prior, targets)
             have = jnp.concatenate([prior_ok.astype(bool), jnp.ones((num_steps,), bool)])
             j = j + (k - 1)  # index into prior ++ targets
             num_steps = num_steps + k - 1
-            weight = (win.valid & have[j]).astype(jnp.float32)
-        elif self.config.recon_at in ("all", "window"):
-            weight = (win.valid & (j >= 0)).astype(jnp.float32)
+            scored = win.valid & have[j]
+        else:
+            scored = win.valid & (j >= 0)
+        if self.config.pool == "mean" or self.config.recon_at != "last":
+            weight = scored.astype(jnp.float32)
         else:
             weight = jnp.zeros((num_steps, k)).at[:, -1].set(1.0)
         jc = jnp.clip(j, 0, num_steps - 1)  # [T, P] with P = K or 1 positions
@@ -742,7 +746,6 @@ class TransAM:
         # Metrics: newest position, and every valid position with targets (whatever recon_at
         # trains); one pooled z per window has no positions to average over.
         pooled = self.config.pool == "mean"
-        scored = jnp.ones(j.shape, bool) if pooled else win.valid & (j >= 0)
         metrics = position_metrics(logits, tgt_act, scored, mse)
         if pooled:
             metrics = {name: v for name, v in metrics.items() if name not in (ACC_ALL, MSE_ALL)}
