@@ -260,8 +260,8 @@ class Train(TrainConfig):
     preset: PresetName = "none"
     """start from a named set of settings, then apply the other flags: 'authors' is the first
     author's Spread training loop as their script runs it (the defaults are the same loop with
-    their action-loss bug fixed), '2026-11' our defaults before 2026-12-01
-    (transam.train.presets, docs/methods.md); `--preset NAME --help` shows its values as the
+    their action-loss bug fixed), '2026-11' our earlier defaults (transam.train.presets,
+    docs/methods.md); `--preset NAME --help` shows its values as the
     defaults"""
 
     def run(self) -> None:

@@ -131,9 +131,8 @@ class TransAMConfig:
     None: the window's token count, 3K, or K with tokens="fuse"); 'stream' only"""
     dropout_masks: Literal["flax", "packed"] | None = None
     """how dropout masks are drawn: flax's, one threefry block per entry ('flax'), or four
-    16-bit draws per block ('packed', :mod:`transam.models.dropout`: about 1.2x faster
-    streaming training, other masks); None: 'flax' for the window model (the numbers of every
-    run so far), 'packed' for 'stream'"""
+    16-bit draws per block ('packed', :mod:`transam.models.dropout`: faster, other masks);
+    None: 'flax' for the window model (keeps its recorded numbers), 'packed' for 'stream'"""
 
     @property
     def masks(self) -> Literal["flax", "packed"]:

@@ -68,9 +68,9 @@ class A2CConfig:
     model_passes: int = 1
     """agent-model gradient steps per collected rollout: the first is the joint update
     (default, the reference: one opponent-model step per update); each further pass is a
-    model-only step over the collection's rollouts again, in order, after its updates. A
-    deviation to measure (the model's learning is bound by its optimiser steps,
-    docs/notes/2026-12-accuracy-levels.md); no effect for methods without an agent-model loss"""
+    model-only step over the collection's rollouts again, in order, after its updates (a
+    deviation from the reference; docs/methods.md). No effect for methods without an
+    agent-model loss"""
     max_grad_norm: float = 0.25
     """global gradient-norm clip, applied to each network (policy, agent model) separately"""
     normalize_returns: bool = True
@@ -83,18 +83,11 @@ class A2CConfig:
     critic_z: bool = True
     """the critic reads the embedding z through the trunk it shares with the actor (default:
     the reference, the paper's V(o, E^o)). Off: the critic is its own LSTM on o_t (and the
-    clock) only; the actor still conditions on z. On the earlier Spread setup (sampling
-    partners, with the clock) the shared trunk collapsed the encoder methods' policies below
-    random play (docs/notes/2026-11-encoder-collapse-critic-z.md); on the authors' setup,
-    without the clock, it does not (docs/results/parity)"""
+    clock) only; the actor still conditions on z (why it exists: docs/methods.md)"""
     time_feature: bool = True
     """append the agent's own clock t / episode_len to the policy input (actor and critic;
     default, our one deviation from the reference's policy). The reference has no clock, so
-    its critic cannot tell the last steps of an episode from the first
-    (docs/notes/2026-11-critic-end-of-episode-bias.md). Measured: on the authors' setup the
-    clock costs nothing (3 seeds, 625k steps: return and accuracy the same); against our
-    default Spread population NAM gains +3.1 to +3.8 over random play at 5M steps with it and
-    +0.4 to +1.3 without (docs/notes/2026-12-slow-policy-learning-default-population.md)"""
+    its critic cannot tell the last steps of an episode from the first (docs/methods.md)"""
     rollouts_per_collect: int = 5
     """rollouts collected with the same parameters before learning from them; then one update
     per rollout, in order, each starting from the LSTM state and window acting had (default,
@@ -132,9 +125,9 @@ class A2CConfig:
     """with recompute_z, which encoder pass gives the policy loss its z: the agent-model
     loss's own forward pass, dropout mask included ('shared', default, the reference: one
     opponent_model pass feeds the reconstruction and, detached, agent.evaluate; it saves a
-    forward pass per update), or a second pass with a fresh dropout mask ('separate', what
-    runs before 2026-12-02 did). Only the TransAM family has such a pass; the other methods
-    always make their own (the same numbers either way: they have no dropout)"""
+    forward pass per update), or a second pass with a fresh dropout mask ('separate'). Only
+    the TransAM family has such a pass; the other methods always make their own (the same
+    numbers either way: they have no dropout)"""
 
 
 @dataclass(frozen=True)
@@ -172,9 +165,8 @@ class TrainConfig:
     num_seeds: int = 1
     """independent runs (seeds) in this process"""
     seed_mode: SeedMode = "vmap"
-    """with several seeds: one vmapped program over all seeds, or the seeds one after another
-    (vmap: 1.1-1.6x the steps/s of one seed at a time for 4-8 NAM seeds on a 2-core CPU;
-    benchmarks/train_throughput.py --seeds n)"""
+    """with several seeds: one vmapped program over all seeds (faster for the small models;
+    docs/performance.md), or the seeds one after another"""
     out: str = ""
     """run directory (default: runs/ENV-METHOD-sSEED)"""
     resume: bool = False
