@@ -125,6 +125,38 @@ def test_a_run_with_a_corrupt_newest_checkpoint_resumes_from_the_previous_one(
         assert (run / name).read_text() == (original / name).read_text(), name
 
 
+def test_a_carried_unfinished_run_resumes_on_a_new_machine(smoke: Path, tmp_path: Path) -> None:
+    """archive_grid(carry=True) keeps an unfinished run with its newest checkpoint only;
+    copied back, the run resumes there and ends as the uninterrupted one did; archived again
+    once finished, the carried checkpoint leaves the archive."""
+    spec = grid.RunSpec("spread", "nam", 0)
+    out = tmp_path / "grid"
+    shutil.copytree(smoke, out)
+    run = out / spec.rel  # as if stopped after its first chunk
+    for name in ("final.json", "eval_train.json", "eval_heldout.json"):
+        (run / name).unlink()
+    (run / "checkpoints" / "chunk_000001.msgpack").unlink()
+    lines = (run / "metrics.jsonl").read_text().splitlines(keepends=True)
+    (run / "metrics.jsonl").write_text(lines[0])
+    archive = tmp_path / "archive"
+    copied = grid.archive_grid(out, archive, carry=True)
+    assert f"{spec.rel} (carried)" in copied
+    assert [p.name for p in (archive / spec.rel / "checkpoints").iterdir()] == [
+        "chunk_000000.msgpack"
+    ]
+    assert grid.archive_grid(out, tmp_path / "plain") == sorted(
+        s.rel for s in grid.grid_specs(ENVS, METHODS, SEEDS) if s != spec
+    )
+    restored = tmp_path / "restored"
+    shutil.copytree(archive, restored)
+    summary = grid.run_one(restored, spec, grid.BUDGETS["smoke"])
+    assert summary["trained"] and summary["evaluated"] == ["train", "heldout"]
+    for name in ("metrics.jsonl", "final.json", "eval_train.json"):
+        assert (restored / spec.rel / name).read_text() == (smoke / spec.rel / name).read_text()
+    assert spec.rel in grid.archive_grid(restored, archive, carry=True)
+    assert not (archive / spec.rel / "checkpoints").exists()
+
+
 def test_bad_grid_arguments_fail_before_writing(tmp_path: Path, capsys) -> None:
     out = tmp_path / "g"
     with pytest.raises(SystemExit):

@@ -183,16 +183,20 @@ ARCHIVE_SKIP = ("checkpoints", "tb", "*.png", "*.lock", "*.tmp")
 report."""
 
 
-def archive_grid(out: str | Path, dest: str | Path) -> list[str]:
+def archive_grid(out: str | Path, dest: str | Path, carry: bool = False) -> list[str]:
     """Copy grid.json, log/ and every finished run (trained, and evaluated on each of
     EVAL_PARTNERS) of the grid in ``out`` into ``dest`` without checkpoints, TensorBoard files
     and figures: what the report reads, about 60 KB a run, so that a study that takes
     several sessions outlives a machine that does not keep runs/. Copied back, :func:`run_one`
-    skips those runs. Unfinished runs are left out: without their checkpoints they could
-    neither resume nor be evaluated. Returns the runs copied (relative paths)."""
+    skips those runs. Unfinished runs are left out (without their checkpoints they could
+    neither resume nor be evaluated), unless ``carry``: then each unfinished run that has a
+    checkpoint is copied with its newest one only, so that, copied back, it resumes there (a
+    run longer than a machine lasts; a TransAM checkpoint is about 8 MB). A run that finished
+    since loses the checkpoint an earlier carry left in ``dest``. Returns the runs copied
+    (relative paths; carried ones end in " (carried)")."""
     import shutil
 
-    from transam.rundir import EVAL_PARTNERS, evaluation_path
+    from transam.rundir import EVAL_PARTNERS, checkpoints, evaluation_path
 
     out, dest = Path(out), Path(dest)
     if not (out / "grid.json").exists():
@@ -201,14 +205,26 @@ def archive_grid(out: str | Path, dest: str | Path) -> list[str]:
     shutil.copy2(out / "grid.json", dest / "grid.json")
     if (out / "log").is_dir():
         shutil.copytree(out / "log", dest / "log", dirs_exist_ok=True)
+    skip = shutil.ignore_patterns(*ARCHIVE_SKIP)
     copied = []
-    for final in sorted(out.glob("runs/*/*/seed_*/final.json")):
-        run = final.parent
-        if all(evaluation_path(run, p).exists() for p in EVAL_PARTNERS):
-            rel = run.relative_to(out)
-            skip = shutil.ignore_patterns(*ARCHIVE_SKIP)
+    for config in sorted(out.glob("runs/*/*/seed_*/config.json")):
+        run = config.parent
+        rel = run.relative_to(out)
+        finished = (run / "final.json").exists() and all(
+            evaluation_path(run, p).exists() for p in EVAL_PARTNERS
+        )
+        saved = checkpoints(run)
+        if finished:
             shutil.copytree(run, dest / rel, ignore=skip, dirs_exist_ok=True)
+            shutil.rmtree(dest / rel / "checkpoints", ignore_errors=True)
             copied.append(str(rel))
+        elif carry and saved:
+            shutil.rmtree(dest / rel, ignore_errors=True)  # no stale evaluation or checkpoint
+            shutil.copytree(run, dest / rel, ignore=skip)
+            (dest / rel / "checkpoints").mkdir()
+            newest = saved[max(saved)]
+            shutil.copy2(newest, dest / rel / "checkpoints" / newest.name)
+            copied.append(f"{rel} (carried)")
     return copied
 
 
