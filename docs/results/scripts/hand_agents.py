@@ -2,7 +2,7 @@
 random play and simple rules on the controlled agent's own observation. Prints each one's mean
 episode return ± its standard error (std / sqrt(episodes)), one episode per parallel copy.
 
-    python docs/results/scripts/hand_agents.py --envs tag lbf overcooked --populations default heldout
+    python docs/results/scripts/hand_agents.py --envs spread tag lbf overcooked
     python docs/results/scripts/hand_agents.py default runs/authors-pop       # Spread, as before
 
 The agents (issue 36, learnability):
@@ -132,13 +132,17 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--envs", nargs="+", default=None, choices=sorted(AGENTS))
     parser.add_argument(
-        "--populations", nargs="+", default=["default", "heldout"], help="'default', 'heldout' "
-        "or a population directory (for one env)"
+        "--populations",
+        nargs="+",
+        default=["default", "heldout"],
+        help="'default', 'heldout' or a population directory (for one env)",
     )
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument(
-        "--overcooked-episodes", type=int, default=None, help="Overcooked's count (default: "
-        "--episodes)"
+        "--overcooked-episodes",
+        type=int,
+        default=None,
+        help="Overcooked's count (default: --episodes)",
     )
     parser.add_argument("--seed", type=int, default=3)
     args = parser.parse_args(argv)

@@ -36,26 +36,28 @@ for job in "${jobs[@]}"; do
       echo "$env/$m: archived in $dest, skipped"
       continue
     fi
-    mkdir -p "$out"
+    mkdir -p "$(dirname "$out")"
     if [ ! -f "$out/final.json" ]; then
       resume=()
       [ -f "$out/config.json" ] && resume=(--resume)
       echo "$env/$m: training into $out ${resume[*]} ($(date -u +%FT%TZ))"
       nice -n 10 transam train --env "$env" --method "$m" --total-steps "${STEPS[$env]}" \
         --num-seeds "$SEEDS" --eval.every-episodes "${EVERY[$env]}" --no-progress \
-        --out "$out" "${resume[@]}" >> "$out/train.log" 2>&1
+        --out "$out" "${resume[@]}" >> "$out.train.log" 2>&1
     fi
     for s in $(seq 0 $((SEEDS - 1))); do
       for p in train heldout; do
         if [ ! -f "$out/seed_$s/eval_$p.json" ]; then
           echo "$env/$m: evaluating seed $s on $p ($(date -u +%FT%TZ))"
           nice -n 10 transam evaluate "$out/seed_$s" --episodes "${FINAL_EPISODES[$env]}" \
-            --partners "$p" >> "$out/evaluate.log" 2>&1
+            --partners "$p" >> "$out.evaluate.log" 2>&1
         fi
       done
     done
     mkdir -p "$dest"
-    cp "$out"/{config.json,partners.json,train.log,evaluate.log} "$dest/"
+    cp "$out"/{config.json,partners.json} "$dest/"
+    cp "$out.train.log" "$dest/train.log"
+    cp "$out.evaluate.log" "$dest/evaluate.log"
     for s in $(seq 0 $((SEEDS - 1))); do
       mkdir -p "$dest/seed_$s"
       cp "$out/seed_$s"/metrics.jsonl "$out/seed_$s"/eval_*.json "$dest/seed_$s/"
