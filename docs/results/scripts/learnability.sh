@@ -16,8 +16,8 @@ set -euo pipefail
 cd "$(git -C "$(dirname "$0")" rev-parse --show-toplevel)"
 source .venv/bin/activate
 
-declare -A STEPS=([lbf]=3000000 [tag]=3000000 [overcooked]=1000000)
-declare -A EVERY=([lbf]=2400 [tag]=2400 [overcooked]=100)  # episodes (x episode length = steps)
+declare -A STEPS=([lbf]=3000000 [tag]=3000000 [overcooked]=1500000)
+declare -A EVERY=([lbf]=2400 [tag]=2400 [overcooked]=150)  # episodes (x episode length = steps)
 declare -A FINAL_EPISODES=([lbf]=500 [tag]=500 [overcooked]=200)
 SEEDS=2
 ROOT=${LEARN_ROOT:-runs/learn}
