@@ -6,7 +6,10 @@
 # partners.json, final.json, each seed's metrics.jsonl and eval_*.json, the train log; no
 # checkpoints, TensorBoard files, figures or PCA arrays).
 #
-#   docs/results/scripts/learnability.sh [ENV[/METHOD] ...]   # default: the whole chain
+#   docs/results/scripts/learnability.sh [ENV[/METHOD[@STEPS]] ...]   # default: the chain
+#
+# METHOD@STEPS: a run of another length (e.g. lbf/nam@6000000 into runs/learn/lbf/nam-6m,
+# archived as learnability/nam-6m), with the evaluation interval scaled to keep 25 of them.
 #
 # Resumable across sessions: a run already archived is skipped; an unfinished one in
 # runs/learn/ENV/METHOD resumes with --resume (the machine must still have runs/learn; a new
@@ -30,25 +33,30 @@ for job in "${jobs[@]}"; do
   methods=nam\ oracle
   [ "$job" != "$env" ] && methods=${job#*/}
   for m in $methods; do
-    out=$ROOT/$env/$m
-    dest=docs/results/$env/learnability/$m
+    steps=${STEPS[$env]} every=${EVERY[$env]} name=$m
+    if [[ $m == *@* ]]; then
+      steps=${m#*@} m=${m%@*}
+      every=$((EVERY[$env] * steps / STEPS[$env])) name=$m-$((steps / 1000000))m
+    fi
+    out=$ROOT/$env/$name
+    dest=docs/results/$env/learnability/$name
     if [ -f "$dest/final.json" ]; then
-      echo "$env/$m: archived in $dest, skipped"
+      echo "$env/$name: archived in $dest, skipped"
       continue
     fi
     mkdir -p "$(dirname "$out")"
     if [ ! -f "$out/final.json" ]; then
       resume=()
       [ -f "$out/config.json" ] && resume=(--resume)
-      echo "$env/$m: training into $out ${resume[*]} ($(date -u +%FT%TZ))"
-      nice -n 10 transam train --env "$env" --method "$m" --total-steps "${STEPS[$env]}" \
-        --num-seeds "$SEEDS" --eval.every-episodes "${EVERY[$env]}" --no-progress \
+      echo "$env/$name: training into $out ${resume[*]} ($(date -u +%FT%TZ))"
+      nice -n 10 transam train --env "$env" --method "$m" --total-steps "$steps" \
+        --num-seeds "$SEEDS" --eval.every-episodes "$every" --no-progress \
         --out "$out" "${resume[@]}" >> "$out.train.log" 2>&1
     fi
     for s in $(seq 0 $((SEEDS - 1))); do
       for p in train heldout; do
         if [ ! -f "$out/seed_$s/eval_$p.json" ]; then
-          echo "$env/$m: evaluating seed $s on $p ($(date -u +%FT%TZ))"
+          echo "$env/$name: evaluating seed $s on $p ($(date -u +%FT%TZ))"
           nice -n 10 transam evaluate "$out/seed_$s" --episodes "${FINAL_EPISODES[$env]}" \
             --partners "$p" >> "$out.evaluate.log" 2>&1
         fi
@@ -63,11 +71,11 @@ for job in "${jobs[@]}"; do
       cp "$out/seed_$s"/metrics.jsonl "$out/seed_$s"/eval_*.json "$dest/seed_$s/"
     done
     cp "$out/final.json" "$dest/final.json"  # last: the archive is complete
-    echo "$env/$m: archived in $dest ($(date -u +%FT%TZ))"
+    echo "$env/$name: archived in $dest ($(date -u +%FT%TZ))"
     if [ -z "${NO_COMMIT:-}" ]; then
       for try in 1 2 3 4 5 6 7 8 9 10; do
         if [ ! -e .git/index.lock ] && git add "$dest" &&
-          git commit -q -m "learnability: $env/$m archived (${STEPS[$env]} steps x $SEEDS seeds, final defaults, default population; docs/results/scripts/learnability.sh)" -- "$dest"; then
+          git commit -q -m "learnability: $env/$name archived ($steps steps x $SEEDS seeds, final defaults, default population; docs/results/scripts/learnability.sh)" -- "$dest"; then
           break
         fi
         sleep 5
