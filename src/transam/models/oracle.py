@@ -42,13 +42,27 @@ class Oracle:
         obs = jnp.asarray(partner.other_obs, jnp.float32).reshape(-1)
         return jnp.concatenate([own, obs, others.reshape(-1)])
 
+    @property
+    def prior_steps(self) -> int:
+        return 0
+
     def step(
-        self, params: Params, carry: Carry, x: LocalStep, partner: PartnerView
+        self,
+        params: Params,
+        carry: Carry,
+        x: LocalStep,
+        partner: PartnerView,
+        key: jax.Array | None = None,
     ) -> tuple[Carry, jax.Array]:
         return carry, self._z(x, partner)
 
     def embed_rollout(
-        self, params: Params, carry: Carry, xs: LocalStep, partner: PartnerView
+        self,
+        params: Params,
+        carry: Carry,
+        xs: LocalStep,
+        partner: PartnerView,
+        key: jax.Array | None = None,
     ) -> jax.Array:
         return jax.vmap(self._z)(xs, partner)
 
@@ -61,6 +75,21 @@ class Oracle:
         carry: Carry,
         xs: LocalStep,
         targets: PartnerRecord,
-        key: jax.Array | None,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         return jnp.zeros((), jnp.float32), {}
+
+    def loss_and_embed(
+        self,
+        params: Params,
+        carry: Carry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array], None]:
+        """No z here: the Oracle's z needs the partner views (``run_embed``)."""
+        return *self.loss(params, carry, xs, targets), None

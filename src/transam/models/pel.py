@@ -94,12 +94,20 @@ class PEL:
     def init_carry(self, spec: GameSpec) -> WindowCarry:
         return self.encoder.init_carry(spec)
 
+    @property
+    def prior_steps(self) -> int:
+        return 0
+
     def step(
-        self, params: Params, carry: WindowCarry, x: LocalStep
+        self, params: Params, carry: WindowCarry, x: LocalStep, key: jax.Array | None = None
     ) -> tuple[WindowCarry, jax.Array]:
+        """(carry, z_t) without dropout: PEL acts without it (the registry's ``dropout``
+        flag), so ``key`` is unused; its loss has dropout."""
         return self.encoder.step(params, carry, x)
 
-    def embed_rollout(self, params: Params, carry: WindowCarry, xs: LocalStep) -> jax.Array:
+    def embed_rollout(
+        self, params: Params, carry: WindowCarry, xs: LocalStep, key: jax.Array | None = None
+    ) -> jax.Array:
         return self.encoder.embed_rollout(params, carry, xs)
 
     def decode(self, params: Params, z: jax.Array, other_obs: jax.Array | None = None) -> Decoded:
@@ -112,6 +120,8 @@ class PEL:
         xs: LocalStep,
         targets: PartnerRecord,
         key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         """Generative + alpha * discriminative loss over a batch (time-major [T, N])."""
         enc = self.encoder
@@ -138,3 +148,16 @@ class PEL:
             "contrastive": dis,
         }
         return ce + self.baseline.pel_alpha * dis, metrics
+
+    def loss_and_embed(
+        self,
+        params: Params,
+        carry: WindowCarry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array], None]:
+        """:meth:`loss`, and no z: the loss's z has dropout, the policy's (acting's) has none."""
+        return *self.loss(params, carry, xs, targets, key), None

@@ -122,11 +122,20 @@ class RecurrentModel:
         out = self.encoder.apply({"params": params["encoder"]}, carry, x)
         return cast(tuple[LSTMCarry, jax.Array], out)
 
-    def step(self, params: Params, carry: LSTMCarry, x: LocalStep) -> tuple[LSTMCarry, jax.Array]:
+    @property
+    def prior_steps(self) -> int:
+        return 0
+
+    def step(
+        self, params: Params, carry: LSTMCarry, x: LocalStep, key: jax.Array | None = None
+    ) -> tuple[LSTMCarry, jax.Array]:
+        """(carry, z_t); no dropout, so ``key`` is unused."""
         check_local(x, self.spec.obs_dim, rollout=False, who=type(self).__name__)
         return self._step(params, carry, x)
 
-    def embed_rollout(self, params: Params, carry: LSTMCarry, xs: LocalStep) -> jax.Array:
+    def embed_rollout(
+        self, params: Params, carry: LSTMCarry, xs: LocalStep, key: jax.Array | None = None
+    ) -> jax.Array:
         check_local(xs, self.spec.obs_dim, rollout=True, who=type(self).__name__)
         return jax.lax.scan(lambda c, x: self._step(params, c, x), carry, xs)[1]
 
@@ -144,6 +153,21 @@ class RecurrentModel:
         carry: LSTMCarry,
         xs: LocalStep,
         targets: PartnerRecord,
-        key: jax.Array | None,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         raise NotImplementedError
+
+    def loss_and_embed(
+        self,
+        params: Params,
+        carry: LSTMCarry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array], None]:
+        """:meth:`loss`, and no z: without dropout the trainer's own pass gives the loss's z."""
+        return *self.loss(params, carry, xs, targets, key), None
