@@ -221,6 +221,42 @@ class PrivilegedModel(AgentModel, Protocol):
     ) -> jax.Array: ...
 
 
+class _HasLoss(Protocol):
+    def loss(
+        self,
+        params: Params,
+        carry: Carry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array]]: ...
+
+
+class ModelDefaults:
+    """The neutral values of the protocol's members that only some methods use, for a model to
+    inherit (NAM, the Oracle, the recurrent baselines, PEL, a model of your own): its loss
+    wants no targets from before a rollout, and gives no z of its own pass (the trainer makes
+    its own: the same numbers for a model whose policy z has no dropout)."""
+
+    @property
+    def prior_steps(self) -> int:
+        return 0
+
+    def loss_and_embed(
+        self: _HasLoss,
+        params: Params,
+        carry: Carry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array], jax.Array | None]:
+        return (*self.loss(params, carry, xs, targets, key, prior, prior_ok), None)
+
+
 # The one place that hands partner data to a model: the trainer and the evaluation call these
 # for every model, and only a privileged one gets (and needs) a PartnerView.
 

@@ -12,11 +12,11 @@ import jax
 import jax.numpy as jnp
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import Carry, Decoded, LocalStep, Params
+from transam.models.base import Carry, Decoded, LocalStep, ModelDefaults, Params
 
 
 @dataclass(frozen=True)
-class NAM:
+class NAM(ModelDefaults):
     num_actions: int
     name: str = "nam"
     privileged: bool = False
@@ -34,10 +34,6 @@ class NAM:
     def _z(self, x: LocalStep) -> jax.Array:
         onehot = jax.nn.one_hot(x.prev_action, self.num_actions, dtype=jnp.float32)
         return jnp.where(x.first, 0.0, onehot)
-
-    @property
-    def prior_steps(self) -> int:
-        return 0
 
     def step(
         self, params: Params, carry: Carry, x: LocalStep, key: jax.Array | None = None
@@ -63,15 +59,3 @@ class NAM:
         prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         return jnp.zeros((), jnp.float32), {}
-
-    def loss_and_embed(
-        self,
-        params: Params,
-        carry: Carry,
-        xs: LocalStep,
-        targets: PartnerRecord,
-        key: jax.Array | None = None,
-        prior: PartnerRecord | None = None,
-        prior_ok: jax.Array | None = None,
-    ) -> tuple[jax.Array, dict[str, jax.Array], None]:
-        return *self.loss(params, carry, xs, targets), None

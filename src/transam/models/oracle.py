@@ -15,14 +15,16 @@ import jax
 import jax.numpy as jnp
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import Carry, Decoded, LocalStep, Params, PartnerView
+from transam.models.base import Carry, Decoded, LocalStep, ModelDefaults, Params, PartnerView
 
 
 @dataclass(frozen=True)
-class Oracle:
+class Oracle(ModelDefaults):
     spec: GameSpec
     name = "oracle"
     privileged = True  # PRIVILEGED: the execution path receives partner data
+    # loss_and_embed gives no z (ModelDefaults): the Oracle's z needs the partner views,
+    # which only run_embed hands it.
 
     @property
     def embed_dim(self) -> int:
@@ -41,10 +43,6 @@ class Oracle:
         others = jnp.where(x.first, 0.0, others)  # one_hot(-1) is zero as well
         obs = jnp.asarray(partner.other_obs, jnp.float32).reshape(-1)
         return jnp.concatenate([own, obs, others.reshape(-1)])
-
-    @property
-    def prior_steps(self) -> int:
-        return 0
 
     def step(
         self,
@@ -80,16 +78,3 @@ class Oracle:
         prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         return jnp.zeros((), jnp.float32), {}
-
-    def loss_and_embed(
-        self,
-        params: Params,
-        carry: Carry,
-        xs: LocalStep,
-        targets: PartnerRecord,
-        key: jax.Array | None = None,
-        prior: PartnerRecord | None = None,
-        prior_ok: jax.Array | None = None,
-    ) -> tuple[jax.Array, dict[str, jax.Array], None]:
-        """No z here: the Oracle's z needs the partner views (``run_embed``)."""
-        return *self.loss(params, carry, xs, targets), None

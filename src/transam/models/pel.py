@@ -43,7 +43,7 @@ import jax.numpy as jnp
 import optax
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import ACC_NEWEST, Decoded, LocalStep, Params
+from transam.models.base import ACC_NEWEST, Decoded, LocalStep, ModelDefaults, Params
 from transam.models.config import BaselineConfig
 from transam.models.heads import supervised_contrastive
 from transam.models.transam import TransAM, TransAMConfig, WindowCarry
@@ -61,8 +61,10 @@ def paired_index(labels: jax.Array) -> jax.Array:
 
 
 @dataclass(frozen=True)
-class PEL:
-    """PEL as an :class:`~transam.models.base.AgentModel` (one environment, no batch axis)."""
+class PEL(ModelDefaults):
+    """PEL as an :class:`~transam.models.base.AgentModel` (one environment, no batch axis).
+    ``loss_and_embed`` gives no z (:class:`~transam.models.base.ModelDefaults`): its loss's
+    z has dropout, the policy's (acting's) has none, so the trainer makes its own pass."""
 
     spec: GameSpec
     config: TransAMConfig = field(default_factory=TransAMConfig)
@@ -93,10 +95,6 @@ class PEL:
 
     def init_carry(self, spec: GameSpec) -> WindowCarry:
         return self.encoder.init_carry(spec)
-
-    @property
-    def prior_steps(self) -> int:
-        return 0
 
     def step(
         self, params: Params, carry: WindowCarry, x: LocalStep, key: jax.Array | None = None
@@ -148,16 +146,3 @@ class PEL:
             "contrastive": dis,
         }
         return ce + self.baseline.pel_alpha * dis, metrics
-
-    def loss_and_embed(
-        self,
-        params: Params,
-        carry: WindowCarry,
-        xs: LocalStep,
-        targets: PartnerRecord,
-        key: jax.Array | None = None,
-        prior: PartnerRecord | None = None,
-        prior_ok: jax.Array | None = None,
-    ) -> tuple[jax.Array, dict[str, jax.Array], None]:
-        """:meth:`loss`, and no z: the loss's z has dropout, the policy's (acting's) has none."""
-        return *self.loss(params, carry, xs, targets, key), None

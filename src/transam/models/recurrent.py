@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import Decoded, LocalStep, Params
+from transam.models.base import Decoded, LocalStep, ModelDefaults, Params
 from transam.models.config import BaselineConfig
 
 LSTMCarry = tuple[jax.Array, jax.Array]
@@ -85,7 +85,7 @@ def _init_params(model: RecurrentModel, key: jax.Array) -> Params:
 
 
 @dataclass(frozen=True)
-class RecurrentModel:
+class RecurrentModel(ModelDefaults):
     """The encoder half of a recurrent baseline (one environment, no batch axis).
 
     Subclasses set ``name`` and ``privileged`` and implement ``_init_heads``, ``decode`` and
@@ -122,10 +122,6 @@ class RecurrentModel:
         out = self.encoder.apply({"params": params["encoder"]}, carry, x)
         return cast(tuple[LSTMCarry, jax.Array], out)
 
-    @property
-    def prior_steps(self) -> int:
-        return 0
-
     def step(
         self, params: Params, carry: LSTMCarry, x: LocalStep, key: jax.Array | None = None
     ) -> tuple[LSTMCarry, jax.Array]:
@@ -158,16 +154,3 @@ class RecurrentModel:
         prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         raise NotImplementedError
-
-    def loss_and_embed(
-        self,
-        params: Params,
-        carry: LSTMCarry,
-        xs: LocalStep,
-        targets: PartnerRecord,
-        key: jax.Array | None = None,
-        prior: PartnerRecord | None = None,
-        prior_ok: jax.Array | None = None,
-    ) -> tuple[jax.Array, dict[str, jax.Array], None]:
-        """:meth:`loss`, and no z: without dropout the trainer's own pass gives the loss's z."""
-        return *self.loss(params, carry, xs, targets, key), None
