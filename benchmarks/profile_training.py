@@ -179,7 +179,11 @@ def main(args: Args) -> None:
             p, traj.model_carry0, traj.x
         )
 
-    if a.z_pass == "separate" or not hasattr(model, "loss_and_embed"):
+    def loss_z(p: Any) -> Any:
+        return model.loss_and_embed(p, traj.model_carry0, traj.x, traj.record, key)[2]
+
+    # The trainer makes a pass of its own unless the loss's pass gives z (z_pass="shared").
+    if a.z_pass == "separate" or jax.eval_shape(loss_z, rs.model_params) is None:
         add("  policy's z pass (forward)", embed, rs.model_params, per)
 
     def model_grad(p: Any, k: jax.Array | None = key) -> Any:

@@ -97,6 +97,31 @@ def names(out: Path) -> list[str]:
 # ------------------------------------------------------------------ verified checkpoints
 
 
+def test_read_metrics_drops_only_a_torn_last_line(tmp_path: Path) -> None:
+    """A kill mid-append leaves a torn last line (no newline after it): dropped. Any other line
+    that is not a record (a damaged file) is an error naming the file and line, not a record
+    silently lost."""
+    path = tmp_path / "metrics.jsonl"
+    good = [{"chunk": 0, "step": 10}, {"chunk": 1, "step": 20}]
+    whole = "".join(json.dumps(r) + "\n" for r in good)
+    path.write_text(whole)
+    assert read_metrics(path) == good
+    path.write_text(whole + '{"chunk": 2, "st')  # torn
+    assert read_metrics(path) == good
+    path.write_text(whole + "[1, 2]")  # a last line without its newline, but not a record
+    assert read_metrics(path) == good
+    for bad, number in (
+        ('{"chunk": 0, "st\n' + whole, 1),  # a torn line with records after it
+        (whole + '{"chunk": 2, "st\n', 3),  # a bad last line that did get its newline
+        (json.dumps(good[0]) + "\n\n" + json.dumps(good[1]) + "\n", 2),  # an empty line
+        (whole + "[1, 2]\n", 3),  # JSON, but not a record
+    ):
+        path.write_text(bad)
+        with pytest.raises(rundir.MetricsError, match=rf"metrics\.jsonl, line {number}: not a"):
+            read_metrics(path)
+    assert issubclass(rundir.MetricsError, ConfigError)  # the CLI prints it as an error
+
+
 def test_checkpoint_verification_catches_truncation_bit_flips_and_reads_old_files(
     tmp_path: Path,
 ) -> None:

@@ -10,6 +10,7 @@ import pytest
 
 from transam.compose import make_env
 from transam.envs.population import Member, Population, Team
+from transam.partners import diversity, learned
 from transam.partners.diversity import (
     LevelsConfig,
     action_ceiling,
@@ -174,3 +175,25 @@ def test_own_window_is_the_observation_and_its_successive_changes() -> None:
     np.testing.assert_array_equal(own_window(own, 3)[1, 0], [16, 0, 0])  # its own episode
     np.testing.assert_array_equal(own_window(own, 1), own)
     assert own_window(np.zeros((3, 5, 7)), 5).shape == (3, 5, 35)
+
+
+def test_measure_and_record_what_the_diversity_command_prints(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``transam partners diversity`` is argument checks and printing around
+    :func:`diversity.measure` (no cross-play for a population that is not a shipped learned
+    split) and :func:`diversity.record` (what --record stores)."""
+    levels = diversity.levels_config(episodes_per_team=4, train_steps=50)
+    assert levels == LevelsConfig(episodes_per_team=4, train_steps=50)
+    assert diversity.levels_config() == LevelsConfig()
+    env = make_env("spread", partners="heuristic")
+    found = diversity.measure(env, None, window=3, levels=levels)
+    assert found.cross_play is None and found.members == [] and found.window == 3
+    assert {"others", "local", "chance", "teams"} <= set(found.accuracy)
+    assert found.levels["episodes_per_team"] == 4 and found.levels_config == levels
+    stored: dict = {}
+    monkeypatch.setattr(learned, "record_diversity", lambda *a: stored.update(args=a))
+    diversity.record("spread", False, found)
+    env_name, split, entry = stored["args"]
+    assert (env_name, split, entry["window"]) == ("spread", "default", 3)
+    assert entry["levels_settings"]["train_steps"] == 50

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import re
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +29,7 @@ from local_data import random_rollout
 from transam.compose import make_env
 from transam.envs.core import ControlledEnv
 from transam.models import AgentModel, BaselineConfig, TransAMConfig, make_model
-from transam.models.base import LocalStep, PartnerView
+from transam.models.base import LocalStep, PartnerView, run_embed
 from transam.registry import PAPER_METHODS
 from transam.rundir import read_metrics
 from transam.train import a2c
@@ -136,6 +137,40 @@ def test_only_the_oracle_execution_path_takes_partner_data(
     moved = views.replace(other_obs=views.other_obs + 1.0)
     _, z2 = model.step(params, model.init_carry(env.spec), xs, moved)
     assert not np.allclose(z, z2)
+
+
+@pytest.mark.parametrize("method", MODELS)
+def test_every_model_has_the_whole_protocol(env: ControlledEnv, data: Any, method: str) -> None:
+    """Every model has every member the trainer calls (so that it never asks which model it
+    holds, the next test): a dropout key on both paths, ``prior_steps`` and ``loss_and_embed``,
+    whose loss is ``loss``'s and whose z, where it gives one, is the training path's."""
+    model = tiny(env, method)
+    for path in (model.step, model.embed_rollout):
+        assert inspect.signature(path).parameters["key"].default is None
+    prior = model.prior_steps
+    assert prior == (
+        TINY_T.context - 1 if method in ("transam", "transam-fuse", "transam-im") else 0
+    )
+    params = model.init(jax.random.key(2), env.spec)
+    xs, views, record = jax.tree.map(lambda a: a[:10], data)  # from the episode's start
+    carry = a2c.batch_carry(model.init_carry(env.spec), ENVS)
+    loss, metrics = jax.jit(model.loss)(params, carry, xs, record)
+    loss2, metrics2, z = jax.jit(model.loss_and_embed)(params, carry, xs, record)
+    assert float(loss2) == float(loss) and metrics2.keys() == metrics.keys()
+    if z is not None:  # the TransAM family
+
+        def one(c: Any, x: Any, v: Any) -> Any:
+            return run_embed(model, params, c, x, v)
+
+        want = jax.vmap(one, in_axes=(0, 1, 1), out_axes=1)(carry, xs, views)
+        np.testing.assert_allclose(z, want, atol=1e-5, rtol=1e-5)
+
+
+def test_the_trainer_never_asks_which_model_it_holds() -> None:
+    """No class checks, ``hasattr`` or ``getattr`` in the A2C update: the protocol's members
+    (:mod:`transam.models.base`) are all it uses."""
+    source = Path(a2c.__file__).read_text()
+    assert not re.search(r"\b(hasattr|isinstance|getattr)\(", source)
 
 
 @pytest.mark.parametrize("method", MODELS)

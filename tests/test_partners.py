@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import re
 from pathlib import Path
 
 import jax
@@ -182,6 +184,30 @@ def test_recipe_training_is_deterministic_and_the_digest_tracks_the_weights(
     learned.save("lbf", "default", {k: v + 1e-3 for k, v in t1.items()}, e1, root=tmp_path)
     assert learned.digest("lbf", root=tmp_path) != before
     assert "diversity" not in learned.load_manifest("lbf", tmp_path)["default"]  # stale: dropped
+
+
+def test_a_corrupt_manifest_is_an_error_naming_it_not_no_levels(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The report's and the demo's accuracy levels come from the shipped manifest: one that is
+    missing, or has no such split or no measurement, means none recorded (None); a damaged one
+    is an error that names the file, not "no levels"."""
+    from transam.reproduce.report.results import partner_levels
+
+    monkeypatch.setattr(learned, "data_dir", lambda env: tmp_path / env)
+    path = tmp_path / "spread" / "manifest.json"
+    assert partner_levels(["spread"]) == {"spread": None}  # no population shipped
+    path.parent.mkdir()
+    path.write_text(json.dumps({"default": {"members": []}}))
+    assert partner_levels(["spread"]) == {"spread": None}  # nothing measured
+    assert partner_levels(["spread"], "heldout") == {"spread": None}  # no such split
+    for damaged in ('{"default": {"diversity": {"action_ceil', "[]", '{"default": [1]}'):
+        path.write_text(damaged)
+        with pytest.raises(learned.ManifestError, match=re.escape(str(path))):
+            partner_levels(["spread"])
+    path.write_bytes(b"\xff\xfe")
+    with pytest.raises(learned.ManifestError, match=re.escape(str(path))):
+        learned.load_manifest("spread")
 
 
 def test_member_action_selection_is_a_property_of_the_member() -> None:

@@ -21,7 +21,7 @@ from flax import struct
 
 from transam.cli import _preset_in, command
 from transam.envs.core import GameSpec, PartnerRecord, Timestep
-from transam.models.base import LocalStep
+from transam.models.base import LocalStep, ModelDefaults
 from transam.models.policy import Policy
 from transam.models.transam import TransAM, TransAMConfig, authors_action_loss
 from transam.rundir import load_run_config
@@ -96,7 +96,7 @@ class LongToy:
 
 
 @dataclass(frozen=True)
-class Counter:
+class Counter(ModelDefaults):
     """z = (steps since the episode began, ``offset`` on the training path): shows which z
     the policy loss got. No loss of its own."""
 
@@ -114,18 +114,27 @@ class Counter:
     def _count(self, carry: jax.Array, x: LocalStep) -> jax.Array:
         return jnp.where(x.first, 0.0, carry + 1.0)
 
-    def step(self, params: Any, carry: Any, x: LocalStep) -> tuple[Any, jax.Array]:
+    def step(self, params: Any, carry: Any, x: LocalStep, key: Any = None) -> tuple[Any, jax.Array]:
         count = self._count(carry, x)
         return count, count[None]
 
-    def embed_rollout(self, params: Any, carry: Any, xs: LocalStep) -> jax.Array:
+    def embed_rollout(self, params: Any, carry: Any, xs: LocalStep, key: Any = None) -> jax.Array:
         counts = jax.lax.scan(lambda c, x: (self._count(c, x),) * 2, carry, xs)[1]
         return counts[:, None] + self.offset
 
     def decode(self, params: Any, z: jax.Array, other_obs: jax.Array) -> Any:
         return None, None
 
-    def loss(self, params: Any, carry: Any, xs: LocalStep, targets: Any, key: Any) -> Any:
+    def loss(
+        self,
+        params: Any,
+        carry: Any,
+        xs: LocalStep,
+        targets: Any,
+        key: Any = None,
+        prior: Any = None,
+        prior_ok: Any = None,
+    ) -> Any:
         return jnp.zeros(()), {}
 
 

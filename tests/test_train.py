@@ -23,7 +23,7 @@ from flax import struct
 
 from transam.cli import main
 from transam.envs.core import GameSpec, PartnerRecord, Timestep
-from transam.models.base import LocalStep
+from transam.models.base import LocalStep, ModelDefaults
 from transam.models.policy import Policy
 from transam.models.transam import TransAMConfig
 from transam.rundir import RunDirError, _flag, read_metrics
@@ -88,7 +88,7 @@ class ToyEnv:
 
 
 @dataclass(frozen=True)
-class Probe:
+class Probe(ModelDefaults):
     """z = scale * (steps since the episode began, a_{t-1}, r_{t-1}, t): shows what the trainer
     fed the execution path. Its carry starts at 99 so a missing reset would show. The loss
     (a linear head on the unscaled features) never sees ``scale``, so ``scale`` moves only
@@ -109,21 +109,28 @@ class Probe:
         feats = jnp.stack([count, x.prev_action.astype(jnp.float32), x.prev_reward, x.t * 1.0])
         return count, feats
 
-    def step(self, params: Any, carry: Any, x: LocalStep) -> tuple[Any, jax.Array]:
+    def step(self, params: Any, carry: Any, x: LocalStep, key: Any = None) -> tuple[Any, jax.Array]:
         count, feats = self._features(carry, x)
         return count, params["scale"] * feats
 
     def _all_features(self, carry: Any, xs: LocalStep) -> jax.Array:
         return jax.lax.scan(lambda c, x: self._features(c, x), carry, xs)[1]
 
-    def embed_rollout(self, params: Any, carry: Any, xs: LocalStep) -> jax.Array:
+    def embed_rollout(self, params: Any, carry: Any, xs: LocalStep, key: Any = None) -> jax.Array:
         return params["scale"] * self._all_features(carry, xs)
 
     def decode(self, params: Any, z: jax.Array, other_obs: jax.Array) -> Any:
         return z @ params["v"], (z @ params["w"])[None]
 
     def loss(
-        self, params: Any, carry: Any, xs: LocalStep, targets: PartnerRecord, key: Any
+        self,
+        params: Any,
+        carry: Any,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: Any = None,
+        prior: Any = None,
+        prior_ok: Any = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         total, metrics = jax.vmap(self._loss, in_axes=(None, 0, 1, 1))(params, carry, xs, targets)
         return total.mean(), {k: v.mean() for k, v in metrics.items()}

@@ -47,13 +47,13 @@ class EnvsList:
     population directory (manifest.json + default.safetensors; only the env it was made for)"""
 
     def run(self) -> None:
-        from transam.compose import make_env
+        from transam.compose import envs_for_partners, make_env
 
         table = Table(title="transam environments (controlled agent's view)")
         for col in ("env", "obs", "acts", "others", "other obs", "other acts", "steps", "teams"):
             table.add_column(col, no_wrap=True, justify="left" if col == "env" else "right")
         notes = []
-        for name in _envs_for(self.partners, PAPER_ENVS):
+        for name in envs_for_partners(self.partners, PAPER_ENVS):
             env = make_env(name, partners=self.partners)
             s = env.spec
             table.add_row(
@@ -97,7 +97,7 @@ class EnvsBench:
     population directory (manifest.json + default.safetensors; only the env it was made for)"""
 
     def run(self) -> None:
-        from transam.compose import make_env
+        from transam.compose import envs_for_partners, make_env
         from transam.envs.rollout import steps_per_second
 
         _check_positive(num_envs=self.num_envs, steps=self.steps, repeats=self.repeats)
@@ -107,7 +107,7 @@ class EnvsBench:
         )
         for col in ("env", "median steps/s", "min", "max"):
             table.add_column(col, justify="right")
-        for name in _envs_for(self.partners, self.envs):
+        for name in envs_for_partners(self.partners, self.envs):
             env = make_env(name, partners=self.partners)
             rates = steps_per_second(env, self.num_envs, self.steps, self.repeats)
             table.add_row(
@@ -143,11 +143,11 @@ class EnvsRollout:
         import jax
         import numpy as np
 
-        from transam.compose import make_env
+        from transam.compose import envs_for_partners, make_env
         from transam.envs.rollout import episode_stats, make_random_rollout
 
         _check_positive(episodes=self.episodes, num_envs=self.num_envs)
-        envs = _envs_for(self.partners, self.envs)
+        envs = envs_for_partners(self.partners, self.envs)
         policy = _controlled_agent(self.agent, envs, "--envs")
         summary = Table(
             title=f"{self.agent} controlled agent: return (worst/best = team means), "
@@ -188,23 +188,6 @@ class EnvsRollout:
                 f"{time.perf_counter() - start:.1f}",
             )
         console.print(summary)
-
-
-def _envs_for(partners: str, envs: tuple[EnvName, ...]) -> tuple[str, ...]:
-    """``envs``, or for a population directory only the env its manifest names (it fits no
-    other); an unknown ``partners`` value stops with the valid choices."""
-    from transam.compose import check_partners, partner_choices
-    from transam.partners.learned import read_population_dir
-
-    if check_partners(partners) in partner_choices():
-        return envs
-    made_for = read_population_dir(partners).get("env")
-    if made_for not in envs:
-        raise SystemExit(
-            f"error: population directory {partners} is for env {made_for!r}; pass --envs "
-            f"{made_for}"
-        )
-    return (made_for,)
 
 
 def _controlled_agent(agent: str, envs: tuple[str, ...], flag: str) -> PolicyFn | None:
@@ -288,10 +271,7 @@ class Demo(TrainConfig):
     """episodes for each shipped pretrained run of --env, shown before training (0: skip)"""
 
     def run(self) -> None:
-        from transam.models.base import ACC_NEWEST
-        from transam.reproduce.report.results import partner_levels
-        from transam.rundir import read_metrics, seed_dirs
-        from transam.train.programs import uniform_policy_eval
+        from transam.evaluation.showcase import training_summary
 
         config = TrainConfig(**{f.name: getattr(self, f.name) for f in fields(TrainConfig)})
         config.validate()
@@ -299,22 +279,19 @@ class Demo(TrainConfig):
             _print_showcase(config.env, self.pretrained_episodes)
         if not _run_train(config):
             return
-        records = read_metrics(seed_dirs(config)[0] / "metrics.jsonl")
-        first, last = records[0], records[-1]
-        rand = uniform_policy_eval(config, config.seed, len(records) - 1)["return"]
+        got = training_summary(config)
+        first, last = got.first, got.last
         console.print(
             f"eval return (seed {config.seed}, {config.eval.episodes} episodes, partners drawn "
             f"uniformly): {_num(first['eval/return'])} after {first['step']:,} steps -> "
             f"{_num(last['eval/return'])} after {last['step']:,}; a uniformly random agent on "
-            f"the same episodes: {_num(rand)}"
+            f"the same episodes: {_num(got.random_return)}"
         )
-        levels = partner_levels([config.env])[config.env] if config.partners == "default" else None
-        key = f"eval/{ACC_NEWEST}"
-        if key in last and levels:
+        if got.accuracy is not None and got.memoryless is not None:
             console.print(
-                f"partner-action accuracy (newest position): {last[key]:.3f} after "
+                f"partner-action accuracy (newest position): {got.accuracy:.3f} after "
                 f"{last['step']:,} steps; the memoryless level from the agent's own view "
-                f"{levels['memoryless_own_accuracy']:.3f}"
+                f"{got.memoryless:.3f}"
             )
 
 
@@ -806,20 +783,10 @@ class PartnersDiversity:
     """training steps of the levels' MLPs, batch 256 (default: LevelsConfig's 20,000)"""
 
     def run(self) -> None:
-        import dataclasses
-
         from rich.markup import escape
 
         from transam.compose import make_env
-        from transam.partners import learned
-        from transam.partners.diversity import (
-            ClassifierConfig,
-            LevelsConfig,
-            action_levels,
-            cross_play,
-            diversity_record,
-            partner_id_accuracy,
-        )
+        from transam.partners import diversity, learned
 
         other = "--heuristic" if self.heuristic else "--population" if self.population else None
         if other and (self.heldout or self.record or (self.heuristic and self.population)):
@@ -840,42 +807,37 @@ class PartnersDiversity:
             raise SystemExit(
                 "error: the recorded levels are random play's: --agent landmark takes no --record"
             )
-        split = "heuristic" if self.heuristic else _partner_split(self.heldout)
+        shipped = None if other else _partner_split(self.heldout)
         if self.heuristic:
-            env = make_env(self.env, partners="heuristic")
+            split, env = "heuristic", make_env(self.env, partners="heuristic")
         elif self.population is not None:
-            split = self.population
-            env = make_env(self.env, partners=self.population)
+            split, env = self.population, make_env(self.env, partners=self.population)
         else:
+            split = _partner_split(self.heldout)
             env = make_env(self.env, population=learned.population(self.env, split))
         if not 1 <= self.window <= env.spec.episode_len:
             raise SystemExit(
                 f"error: --window must be between 1 and {self.env}'s episode length "
                 f"{env.spec.episode_len} (a window stays inside one episode), got {self.window}"
             )
-        if self.env in ("lbf", "overcooked") and not (self.heuristic or self.population):
-            members = learned.learned_members(self.env, split)
-            names = list(members)
-            mat = cross_play(self.env, [members[n] for n in names])
+        lv_cfg = diversity.levels_config(self.levels_episodes, self.levels_steps)
+        found = diversity.measure(env, shipped, self.window, lv_cfg, agent)
+        if found.cross_play is not None:
             table = Table(title=f"{self.env} cross-play (row: partner, column: stand-in slot)")
             table.add_column("partner", no_wrap=True)
-            for j in range(len(names)):
+            for j in range(len(found.members)):
                 table.add_column(str(j), justify="right")
-            for i, (n, row) in enumerate(zip(names, mat, strict=True)):
+            for i, (n, row) in enumerate(zip(found.members, found.cross_play, strict=True)):
                 table.add_row(f"{i} {n}", *(f"{x:.2f}" for x in row))
             console.print(table)
-        acc = partner_id_accuracy(env, ClassifierConfig(window=self.window))
+        acc = found.accuracy
         console.print(
             f"{self.env} {split}: partner-index top-1 accuracy from the others' obs+actions "
             f"{acc['others']:.3f}, from the controlled agent's local trajectory "
             f"{acc['local']:.3f}, "
             f"chance {acc['chance']:.3f} ({acc['teams']} teams, window {self.window})"
         )
-        given = {"episodes_per_team": self.levels_episodes, "train_steps": self.levels_steps}
-        lv_cfg = dataclasses.replace(
-            LevelsConfig(), **{k: v for k, v in given.items() if v is not None}
-        )
-        levels = action_levels(env, lv_cfg, agent)
+        levels = found.levels
         table = Table(title=f"{self.env} {split}: partners' action-accuracy levels")
         table.add_column("level")
         table.add_column("value", justify="right")
@@ -918,9 +880,7 @@ class PartnersDiversity:
             f"partner steps, {self.agent} controlled agent"
         )
         if self.record:
-            found = diversity_record(self.env, self.heldout, self.window, acc, levels, lv_cfg)
-            learned.record_diversity(self.env, split, found)
-            console.print(f"recorded in {learned.data_dir(self.env) / 'manifest.json'}")
+            console.print(f"recorded in {diversity.record(self.env, self.heldout, found)}")
 
 
 @dataclass

@@ -83,6 +83,22 @@ def resolve_partners(partners: str) -> str:
     return value if value in partner_choices() else str(Path(value).resolve())
 
 
+def envs_for_partners(partners: str, envs: tuple[str, ...]) -> tuple[str, ...]:
+    """The envs of ``envs`` that ``partners`` can play: all of them for a named choice, the
+    one env a population directory was made for (:class:`EnvError` where ``envs`` lacks it;
+    an unknown ``partners`` value is one too, naming the valid choices)."""
+    from transam.partners.learned import read_population_dir
+
+    if check_partners(partners) in partner_choices():
+        return envs
+    made_for = read_population_dir(partners).get("env")
+    if made_for not in envs:
+        raise EnvError(
+            f"population directory {partners} is for env {made_for!r}; pass --envs {made_for}"
+        )
+    return (made_for,)
+
+
 def partner_population(
     name: str, config: Any = None, partners: str | os.PathLike[str] = "default"
 ) -> Population:

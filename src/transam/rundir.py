@@ -122,16 +122,38 @@ def write_json(path: Path, obj: Any) -> None:
 # ---------------------------------------------------------------- metrics.jsonl
 
 
+class MetricsError(ConfigError):
+    """A metrics file line that is not a record (other than a torn last line): the file is
+    damaged, and reading on would silently lose records. A :class:`ConfigError`, so that the
+    command line reports it as an error naming the file, not a traceback."""
+
+
 def read_metrics(path: Path) -> list[dict[str, Any]]:
-    """The records of a metrics.jsonl (a torn last line from a kill is skipped)."""
+    """The records of a metrics.jsonl (or any JSON-lines file written a record at a time).
+
+    A torn last line, the end of a write cut off by a kill (no newline after it, and not a
+    record), is dropped; any other line that is not a JSON object raises
+    :class:`MetricsError` with its line number.
+    """
     if not path.exists():
         return []
+    lines = path.read_text().split("\n")  # the last item: after the final newline ("" if whole)
     records = []
-    for line in path.read_text().splitlines():
+    for number, line in enumerate(lines, 1):
+        last = number == len(lines)
+        if last and not line:
+            break
         try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue
+            record = json.loads(line)
+        except json.JSONDecodeError as err:
+            if last:  # torn: its write never reached the newline
+                break
+            raise MetricsError(f"{path}, line {number}: not a JSON record ({err})") from None
+        if not isinstance(record, dict):
+            if last:
+                break
+            raise MetricsError(f"{path}, line {number}: not a JSON object: {line[:80]!r}")
+        records.append(record)
     return records
 
 

@@ -1,5 +1,6 @@
-"""What the demo shows before it trains: the shipped pretrained runs of an environment against
-its default partners, beside the references that say whether they learned anything.
+"""What the demo shows: before it trains, the shipped pretrained runs of an environment against
+its default partners, beside the references that say whether they learned anything
+(:func:`showcase`); after, how far its own run got (:func:`training_summary`).
 
 Return references: a uniformly random controlled agent on the same evaluation episodes
 (:func:`~transam.evaluation.final.paired_random_returns`: the same partners and starts, so
@@ -22,6 +23,7 @@ import numpy as np
 from transam.evaluation.final import evaluate_run, paired_random_returns
 from transam.evaluation.weights import pretrained_dir, pretrained_names, read_card
 from transam.models.base import ACC_NEWEST
+from transam.train.config import TrainConfig
 
 
 @dataclass(frozen=True)
@@ -91,3 +93,40 @@ def accuracy_by_step(res: dict[str, Any], every: int = 4) -> list[tuple[int, flo
     curve = res["per_step"].get(ACC_NEWEST) or []
     steps = sorted({*range(0, len(curve), every), len(curve) - 1}) if curve else []
     return [(t, curve[t]) for t in steps if curve[t] is not None]
+
+
+@dataclass(frozen=True)
+class TrainingSummary:
+    """How far a finished training run got (what ``transam demo`` prints after training)."""
+
+    first: dict[str, Any]
+    """the first evaluation's metrics record (seed ``config.seed``)"""
+    last: dict[str, Any]
+    """the last evaluation's"""
+    random_return: float
+    """a uniformly random agent's mean return on the last evaluation's episodes"""
+    accuracy: float | None
+    """the last evaluation's partner-action accuracy (newest position); None without one"""
+    memoryless: float | None
+    """the population's recorded memoryless level from the agent's own view (the default
+    partners only; None where none is recorded)"""
+
+
+def training_summary(config: TrainConfig) -> TrainingSummary:
+    """The first seed's first and last evaluations of the finished run ``config``, beside a
+    uniformly random agent on the same episodes and the memoryless accuracy level."""
+    from transam.reproduce.report.results import partner_levels
+    from transam.rundir import read_metrics, seed_dirs
+    from transam.train.programs import uniform_policy_eval
+
+    records = read_metrics(seed_dirs(config)[0] / "metrics.jsonl")
+    first, last = records[0], records[-1]
+    rand = uniform_policy_eval(config, config.seed, len(records) - 1)["return"]
+    levels = partner_levels([config.env])[config.env] if config.partners == "default" else None
+    return TrainingSummary(
+        first=first,
+        last=last,
+        random_return=rand,
+        accuracy=last.get(f"eval/{ACC_NEWEST}"),
+        memoryless=levels["memoryless_own_accuracy"] if levels else None,
+    )

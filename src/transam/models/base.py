@@ -1,18 +1,25 @@
 """The agent-model protocol every method (TransAM, its ablations, the baselines) implements.
 
 An agent model turns the controlled agent's own trajectory into an embedding z_t that the
-policy conditions on. It has three parts, and the types keep execution honest:
+policy conditions on. It has these parts, and the types keep execution honest:
 
 * ``step`` (execution path): one step of *local* data (:class:`LocalStep`) and a carry (context
   window, recurrent state) -> new carry and z_t. It never receives partner data: its input type
   has no field for it and its signature no argument for it. Only a :class:`PrivilegedModel`
-  (``privileged = True``: the Oracle baseline) takes a :class:`PartnerView` as well.
+  (``privileged = True``: the Oracle baseline) takes a :class:`PartnerView` as well, and only
+  :func:`run_step` / :func:`run_embed` hand it one.
 * ``embed_rollout`` (training path): the same z for a whole rollout of T steps, recomputed with
   gradients from the carry at the rollout's start. It must equal ``step`` applied in sequence.
 * ``loss``: the auxiliary agent-modeling loss over a *batch* of rollouts (contrastive losses
   compare environments), which may use the training-only
-  :class:`~transam.envs.core.PartnerRecord` targets.
+  :class:`~transam.envs.core.PartnerRecord` targets; ``loss_and_embed`` is the same loss with
+  the z of its own encoder pass, where the policy may read that z.
 * ``decode``: the training-only decoder on one embedding, for evaluation metrics.
+
+Every model has every member, so the trainer calls the same methods whatever it holds (no
+``hasattr`` or class checks): what only some methods use has a neutral value in the others,
+``key`` (dropout; ignored without dropout), ``prior_steps`` (0: the loss wants no targets from
+before the rollout) and ``loss_and_embed``'s z (None: the trainer makes its own pass).
 
 ``step``, ``embed_rollout`` and ``decode`` act on ONE environment (no batch axis); the trainer
 vmaps them. ``loss`` takes the trainer's time-major batch.
@@ -23,13 +30,13 @@ can forget to).
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import jax
 import jax.numpy as jnp
 from flax import struct
 
-from transam.envs.core import GameSpec, PartnerRecord
+from transam.envs.core import EnvState, GameSpec, PartnerRecord
 
 Params = Any
 Carry = Any
@@ -109,12 +116,19 @@ class AgentModel(Protocol):
 
     @property
     def privileged(self) -> bool:
-        """True only for the Oracle baseline."""
+        """True only for the Oracle baseline (a :class:`PrivilegedModel`)."""
         ...
 
     @property
     def embed_dim(self) -> int:
         """Width of z."""
+        ...
+
+    @property
+    def prior_steps(self) -> int:
+        """How many steps before a rollout the loss also reconstructs, given their targets
+        (``loss``'s ``prior``): TransAM's K-1 with ``recon_at="window"`` (the authors' loop
+        supervises every window position); 0 for every other model."""
         ...
 
     def init(self, key: jax.Array, spec: GameSpec) -> Params:
@@ -125,13 +139,20 @@ class AgentModel(Protocol):
         """The carry before any step (a step with ``first=True`` resets it anyway)."""
         ...
 
-    def step(self, params: Params, carry: Carry, x: LocalStep) -> tuple[Carry, jax.Array]:
-        """Execution path: (carry, z_t) from local data only."""
+    def step(
+        self, params: Params, carry: Carry, x: LocalStep, key: jax.Array | None = None
+    ) -> tuple[Carry, jax.Array]:
+        """Execution path: (carry, z_t) from local data only. ``key`` turns on the model's
+        dropout (acting with dropout, as the authors' code does; the registry's ``dropout``
+        flag says which methods have any); a model without dropout ignores it."""
         ...
 
-    def embed_rollout(self, params: Params, carry: Carry, xs: LocalStep) -> jax.Array:
+    def embed_rollout(
+        self, params: Params, carry: Carry, xs: LocalStep, key: jax.Array | None = None
+    ) -> jax.Array:
         """Training path: z [T, embed_dim] for the rollout ``xs`` (leading axis T), starting from
-        the carry the execution path had before ``xs[0]``; equals ``step`` applied in order."""
+        the carry the execution path had before ``xs[0]``; equals ``step`` applied in order
+        (with dropout under ``key``, as ``step``)."""
         ...
 
     def decode(self, params: Params, z: jax.Array, other_obs: jax.Array) -> Decoded:
@@ -147,12 +168,34 @@ class AgentModel(Protocol):
         carry: Carry,
         xs: LocalStep,
         targets: PartnerRecord,
-        key: jax.Array | None,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         """Auxiliary loss and its scalar metrics (e.g. :data:`ACC_NEWEST`, ``obs_mse``) over a
         batch of rollouts: ``carry`` [N, ...] (before each rollout), ``xs`` and ``targets``
         time-major [T, N, ...], lined up in time. ``key`` enables dropout (None: deterministic).
-        Zero and no metrics for models without one."""
+        ``prior`` [``prior_steps``, N, ...] are the targets of the steps before the rollout,
+        oldest first, and ``prior_ok`` [``prior_steps``, N] which of them exist (those from
+        before the trainer's collection do not); None, and ignored, where ``prior_steps`` is 0.
+        Zero and no metrics for models without a loss."""
+        ...
+
+    def loss_and_embed(
+        self,
+        params: Params,
+        carry: Carry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array], jax.Array | None]:
+        """:meth:`loss` and the z [T, N, embed_dim] of the loss's own encoder pass (its dropout
+        mask included), which the policy loss reads with the trainer's ``z_pass="shared"`` (the
+        authors' one forward pass per update; the TransAM family). None where the trainer is
+        to make a pass of its own (a model without such a pass, or without dropout, where a
+        second pass gives the same numbers)."""
         ...
 
 
@@ -160,9 +203,103 @@ class PrivilegedModel(AgentModel, Protocol):
     """A model whose execution path also sees the other agents (the Oracle upper bound)."""
 
     def step(  # type: ignore[override]
-        self, params: Params, carry: Carry, x: LocalStep, partner: PartnerView
+        self,
+        params: Params,
+        carry: Carry,
+        x: LocalStep,
+        partner: PartnerView,
+        key: jax.Array | None = None,
     ) -> tuple[Carry, jax.Array]: ...
 
     def embed_rollout(  # type: ignore[override]
-        self, params: Params, carry: Carry, xs: LocalStep, partner: PartnerView
+        self,
+        params: Params,
+        carry: Carry,
+        xs: LocalStep,
+        partner: PartnerView,
+        key: jax.Array | None = None,
     ) -> jax.Array: ...
+
+
+class _HasLoss(Protocol):
+    def loss(
+        self,
+        params: Params,
+        carry: Carry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array]]: ...
+
+
+class ModelDefaults:
+    """The neutral values of the protocol's members that only some methods use, for a model to
+    inherit (NAM, the Oracle, the recurrent baselines, PEL, a model of your own): its loss
+    wants no targets from before a rollout, and gives no z of its own pass (the trainer makes
+    its own: the same numbers for a model whose policy z has no dropout)."""
+
+    @property
+    def prior_steps(self) -> int:
+        return 0
+
+    def loss_and_embed(
+        self: _HasLoss,
+        params: Params,
+        carry: Carry,
+        xs: LocalStep,
+        targets: PartnerRecord,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
+    ) -> tuple[jax.Array, dict[str, jax.Array], jax.Array | None]:
+        return (*self.loss(params, carry, xs, targets, key, prior, prior_ok), None)
+
+
+# The one place that hands partner data to a model: the trainer and the evaluation call these
+# for every model, and only a privileged one gets (and needs) a PartnerView.
+
+
+def partner_view(model: AgentModel, env_state: EnvState) -> PartnerView | None:
+    """The other agents' data in ``env_state`` for a privileged model (the Oracle); None for
+    every other model, so its execution path cannot be handed any."""
+    if not model.privileged:
+        return None
+    return PartnerView(env_state.other_obs, env_state.other_prev_actions)
+
+
+def run_step(
+    model: AgentModel,
+    params: Params,
+    carry: Carry,
+    x: LocalStep,
+    partner: PartnerView | None,
+    key: jax.Array | None = None,
+) -> tuple[Carry, jax.Array]:
+    """``model.step`` on one environment, with ``partner`` (from :func:`partner_view`) for a
+    privileged model only."""
+    if model.privileged:
+        return cast(PrivilegedModel, model).step(params, carry, x, _view(partner), key)
+    return model.step(params, carry, x, key)
+
+
+def run_embed(
+    model: AgentModel,
+    params: Params,
+    carry: Carry,
+    xs: LocalStep,
+    partner: PartnerView | None,
+    key: jax.Array | None = None,
+) -> jax.Array:
+    """``model.embed_rollout`` of one environment's rollout, with the rollout's ``partner``
+    views [T, ...] for a privileged model only."""
+    if model.privileged:
+        return cast(PrivilegedModel, model).embed_rollout(params, carry, xs, _view(partner), key)
+    return model.embed_rollout(params, carry, xs, key)
+
+
+def _view(partner: PartnerView | None) -> PartnerView:
+    if partner is None:
+        raise ValueError("a privileged model's execution path needs its PartnerView")
+    return partner

@@ -56,6 +56,8 @@ class CAIL(RecurrentModel):
         xs: LocalStep,
         targets: PartnerRecord,
         key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         z = self.embed_batch(params, carry, xs)  # [T, N, E]
         logits = self._logits(params, z, targets.other_obs)  # [T, N, others, A]

@@ -106,6 +106,8 @@ class CARL(RecurrentModel):
         xs: LocalStep,
         targets: PartnerRecord,
         key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         z = self.embed_batch(params, carry, xs)  # [T, N, E]
         proj = cast(jax.Array, self.projection.apply({"params": params["projection"]}, z))

@@ -86,6 +86,8 @@ class LIAM(RecurrentModel):
         xs: LocalStep,
         targets: PartnerRecord,
         key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         z = self.embed_batch(params, carry, xs)  # [T, N, E]
         pred_obs, logits = self._decode(params, z)

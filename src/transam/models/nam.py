@@ -12,11 +12,11 @@ import jax
 import jax.numpy as jnp
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import Carry, Decoded, LocalStep, Params
+from transam.models.base import Carry, Decoded, LocalStep, ModelDefaults, Params
 
 
 @dataclass(frozen=True)
-class NAM:
+class NAM(ModelDefaults):
     num_actions: int
     name: str = "nam"
     privileged: bool = False
@@ -35,10 +35,14 @@ class NAM:
         onehot = jax.nn.one_hot(x.prev_action, self.num_actions, dtype=jnp.float32)
         return jnp.where(x.first, 0.0, onehot)
 
-    def step(self, params: Params, carry: Carry, x: LocalStep) -> tuple[Carry, jax.Array]:
+    def step(
+        self, params: Params, carry: Carry, x: LocalStep, key: jax.Array | None = None
+    ) -> tuple[Carry, jax.Array]:
         return carry, self._z(x)
 
-    def embed_rollout(self, params: Params, carry: Carry, xs: LocalStep) -> jax.Array:
+    def embed_rollout(
+        self, params: Params, carry: Carry, xs: LocalStep, key: jax.Array | None = None
+    ) -> jax.Array:
         return jax.vmap(self._z)(xs)
 
     def decode(self, params: Params, z: jax.Array, other_obs: jax.Array) -> Decoded:
@@ -50,6 +54,8 @@ class NAM:
         carry: Carry,
         xs: LocalStep,
         targets: PartnerRecord,
-        key: jax.Array | None,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         return jnp.zeros((), jnp.float32), {}

@@ -15,14 +15,16 @@ import jax
 import jax.numpy as jnp
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import Carry, Decoded, LocalStep, Params, PartnerView
+from transam.models.base import Carry, Decoded, LocalStep, ModelDefaults, Params, PartnerView
 
 
 @dataclass(frozen=True)
-class Oracle:
+class Oracle(ModelDefaults):
     spec: GameSpec
     name = "oracle"
     privileged = True  # PRIVILEGED: the execution path receives partner data
+    # loss_and_embed gives no z (ModelDefaults): the Oracle's z needs the partner views,
+    # which only run_embed hands it.
 
     @property
     def embed_dim(self) -> int:
@@ -43,12 +45,22 @@ class Oracle:
         return jnp.concatenate([own, obs, others.reshape(-1)])
 
     def step(
-        self, params: Params, carry: Carry, x: LocalStep, partner: PartnerView
+        self,
+        params: Params,
+        carry: Carry,
+        x: LocalStep,
+        partner: PartnerView,
+        key: jax.Array | None = None,
     ) -> tuple[Carry, jax.Array]:
         return carry, self._z(x, partner)
 
     def embed_rollout(
-        self, params: Params, carry: Carry, xs: LocalStep, partner: PartnerView
+        self,
+        params: Params,
+        carry: Carry,
+        xs: LocalStep,
+        partner: PartnerView,
+        key: jax.Array | None = None,
     ) -> jax.Array:
         return jax.vmap(self._z)(xs, partner)
 
@@ -61,6 +73,8 @@ class Oracle:
         carry: Carry,
         xs: LocalStep,
         targets: PartnerRecord,
-        key: jax.Array | None,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         return jnp.zeros((), jnp.float32), {}

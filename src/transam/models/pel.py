@@ -43,7 +43,7 @@ import jax.numpy as jnp
 import optax
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import ACC_NEWEST, Decoded, LocalStep, Params
+from transam.models.base import ACC_NEWEST, Decoded, LocalStep, ModelDefaults, Params
 from transam.models.config import BaselineConfig
 from transam.models.heads import supervised_contrastive
 from transam.models.transam import TransAM, TransAMConfig, WindowCarry
@@ -61,8 +61,10 @@ def paired_index(labels: jax.Array) -> jax.Array:
 
 
 @dataclass(frozen=True)
-class PEL:
-    """PEL as an :class:`~transam.models.base.AgentModel` (one environment, no batch axis)."""
+class PEL(ModelDefaults):
+    """PEL as an :class:`~transam.models.base.AgentModel` (one environment, no batch axis).
+    ``loss_and_embed`` gives no z (:class:`~transam.models.base.ModelDefaults`): its loss's
+    z has dropout, the policy's (acting's) has none, so the trainer makes its own pass."""
 
     spec: GameSpec
     config: TransAMConfig = field(default_factory=TransAMConfig)
@@ -95,11 +97,15 @@ class PEL:
         return self.encoder.init_carry(spec)
 
     def step(
-        self, params: Params, carry: WindowCarry, x: LocalStep
+        self, params: Params, carry: WindowCarry, x: LocalStep, key: jax.Array | None = None
     ) -> tuple[WindowCarry, jax.Array]:
+        """(carry, z_t) without dropout: PEL acts without it (the registry's ``dropout``
+        flag), so ``key`` is unused; its loss has dropout."""
         return self.encoder.step(params, carry, x)
 
-    def embed_rollout(self, params: Params, carry: WindowCarry, xs: LocalStep) -> jax.Array:
+    def embed_rollout(
+        self, params: Params, carry: WindowCarry, xs: LocalStep, key: jax.Array | None = None
+    ) -> jax.Array:
         return self.encoder.embed_rollout(params, carry, xs)
 
     def decode(self, params: Params, z: jax.Array, other_obs: jax.Array | None = None) -> Decoded:
@@ -112,6 +118,8 @@ class PEL:
         xs: LocalStep,
         targets: PartnerRecord,
         key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         """Generative + alpha * discriminative loss over a batch (time-major [T, N])."""
         enc = self.encoder

@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 
 from transam.envs.core import GameSpec, PartnerRecord
-from transam.models.base import Decoded, LocalStep, Params
+from transam.models.base import Decoded, LocalStep, ModelDefaults, Params
 from transam.models.config import BaselineConfig
 
 LSTMCarry = tuple[jax.Array, jax.Array]
@@ -85,7 +85,7 @@ def _init_params(model: RecurrentModel, key: jax.Array) -> Params:
 
 
 @dataclass(frozen=True)
-class RecurrentModel:
+class RecurrentModel(ModelDefaults):
     """The encoder half of a recurrent baseline (one environment, no batch axis).
 
     Subclasses set ``name`` and ``privileged`` and implement ``_init_heads``, ``decode`` and
@@ -122,11 +122,16 @@ class RecurrentModel:
         out = self.encoder.apply({"params": params["encoder"]}, carry, x)
         return cast(tuple[LSTMCarry, jax.Array], out)
 
-    def step(self, params: Params, carry: LSTMCarry, x: LocalStep) -> tuple[LSTMCarry, jax.Array]:
+    def step(
+        self, params: Params, carry: LSTMCarry, x: LocalStep, key: jax.Array | None = None
+    ) -> tuple[LSTMCarry, jax.Array]:
+        """(carry, z_t); no dropout, so ``key`` is unused."""
         check_local(x, self.spec.obs_dim, rollout=False, who=type(self).__name__)
         return self._step(params, carry, x)
 
-    def embed_rollout(self, params: Params, carry: LSTMCarry, xs: LocalStep) -> jax.Array:
+    def embed_rollout(
+        self, params: Params, carry: LSTMCarry, xs: LocalStep, key: jax.Array | None = None
+    ) -> jax.Array:
         check_local(xs, self.spec.obs_dim, rollout=True, who=type(self).__name__)
         return jax.lax.scan(lambda c, x: self._step(params, c, x), carry, xs)[1]
 
@@ -144,6 +149,8 @@ class RecurrentModel:
         carry: LSTMCarry,
         xs: LocalStep,
         targets: PartnerRecord,
-        key: jax.Array | None,
+        key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
         raise NotImplementedError

@@ -209,6 +209,11 @@ class StreamTransAM:
         return 3 if self.config.tokens == "separate" else 1
 
     @property
+    def prior_steps(self) -> int:
+        """0: each step is decoded once, in its own rollout (``recon_at`` does not apply)."""
+        return 0
+
+    @property
     def memory(self) -> int:
         """M, the tokens each token attends to before itself (the cache length)."""
         m = self.config.memory
@@ -291,8 +296,11 @@ class StreamTransAM:
         xs: LocalStep,
         targets: PartnerRecord,
         key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array]]:
-        """:meth:`rollout_loss` averaged over a batch of rollouts (time-major [T, N])."""
+        """:meth:`rollout_loss` averaged over a batch of rollouts (time-major [T, N]); no
+        ``prior`` (``prior_steps`` is 0)."""
         total, metrics, _ = self.loss_and_embed(params, carry, xs, targets, key)
         return total, metrics
 
@@ -303,6 +311,8 @@ class StreamTransAM:
         xs: LocalStep,
         targets: PartnerRecord,
         key: jax.Array | None = None,
+        prior: PartnerRecord | None = None,
+        prior_ok: jax.Array | None = None,
     ) -> tuple[jax.Array, dict[str, jax.Array], jax.Array]:
         """:meth:`loss` and the z [T, N, width] of the same pass (as
         :meth:`TransAM.loss_and_embed`)."""

@@ -485,6 +485,14 @@ class TransAM:
     def embed_dim(self) -> int:
         return self.config.width
 
+    @property
+    def prior_steps(self) -> int:
+        """K-1 with ``recon_at="window"`` (the window positions before a rollout are
+        reconstructed from the trainer's targets); 0 otherwise, and with ``pool="mean"``,
+        whose loss decodes one pooled z per window."""
+        cfg = self.config
+        return cfg.context - 1 if cfg.recon_at == "window" and cfg.pool == "last" else 0
+
     # -- modules ---------------------------------------------------------------------------------
 
     def _encoder(self, deterministic: bool) -> _Encoder:

@@ -32,8 +32,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import flax.linen as nn
@@ -461,3 +463,73 @@ def diversity_record(
         "measured_by": f"transam partners diversity {env}" + (" --heldout" if heldout else ""),
         "population_digest": learned.digest(env, split),
     }
+
+
+# ---------------------------------------------------------------- the command's measurement
+
+CROSS_PLAY_ENVS = ("lbf", "overcooked")
+"""The games whose learned members can fill the controlled slot (:func:`cross_play`)."""
+
+
+@dataclass(frozen=True)
+class Diversity:
+    """What ``transam partners diversity`` measures of one population (:func:`measure`)."""
+
+    members: list[str]
+    """the learned members of the cross-play matrix, in its order (empty: no matrix)"""
+    cross_play: np.ndarray | None
+    """:func:`cross_play` of ``members`` (LBF and Overcooked's shipped splits only)"""
+    accuracy: dict[str, Any]
+    """:func:`partner_id_accuracy`"""
+    levels: dict[str, Any]
+    """:func:`action_levels`"""
+    levels_config: LevelsConfig
+    window: int
+
+
+def levels_config(
+    episodes_per_team: int | None = None, train_steps: int | None = None
+) -> LevelsConfig:
+    """:class:`LevelsConfig` with the given settings (None: its default)."""
+    given = {"episodes_per_team": episodes_per_team, "train_steps": train_steps}
+    return dataclasses.replace(LevelsConfig(), **{k: v for k, v in given.items() if v is not None})
+
+
+def measure(
+    env: ControlledEnv,
+    shipped: str | None,
+    window: int = 10,
+    levels: LevelsConfig | None = None,
+    controlled: PolicyFn | None = None,
+) -> Diversity:
+    """Measure the population ``env`` plays: the partner-index classifier over ``window``
+    steps, the action levels (with ``controlled`` as the controlled agent's policy; None:
+    uniformly random) and, where ``env`` plays ``shipped``, a shipped learned split ('default'
+    or 'heldout'; None for any other population) of a game in :data:`CROSS_PLAY_ENVS`, its
+    cross-play matrix."""
+    name = env.spec.name
+    members: list[str] = []
+    matrix = None
+    if shipped is not None and name in CROSS_PLAY_ENVS:
+        found = learned.learned_members(name, shipped)
+        members = list(found)
+        matrix = cross_play(name, [found[n] for n in members])
+    levels = levels or LevelsConfig()
+    return Diversity(
+        members=members,
+        cross_play=matrix,
+        accuracy=partner_id_accuracy(env, ClassifierConfig(window=window)),
+        levels=action_levels(env, levels, controlled),
+        levels_config=levels,
+        window=window,
+    )
+
+
+def record(env: str, heldout: bool, found: Diversity) -> Path:
+    """Store ``found`` (of the shipped ``env`` split) in the shipped manifest, as
+    :func:`diversity_record`; returns the manifest's path."""
+    entry = diversity_record(
+        env, heldout, found.window, found.accuracy, found.levels, found.levels_config
+    )
+    learned.record_diversity(env, "heldout" if heldout else "default", entry)
+    return learned.data_dir(env) / "manifest.json"

@@ -38,6 +38,7 @@ from flax.traverse_util import flatten_dict, unflatten_dict
 from safetensors.numpy import load_file, save_file
 
 from transam import registry
+from transam.envs.core import EnvError
 from transam.envs.joint import JointView, play
 from transam.envs.population import Member, PolicyFn, Population, Team
 from transam.partners import liam
@@ -320,13 +321,26 @@ def save(
     return write_manifest(env, manifest, root)
 
 
+class ManifestError(EnvError):
+    """A partner manifest that exists but cannot be read; the message names the file (a
+    damaged manifest is an error, never read as "nothing recorded")."""
+
+
 def load_manifest(env: str, root: Path | None = None) -> dict:
+    """``env``'s shipped manifest (or the one under ``root``): FileNotFoundError where there is
+    none, :class:`ManifestError` where it is not a JSON object."""
     path = (root or data_dir(env)) / "manifest.json"
     if not path.exists():
         raise FileNotFoundError(
             f"no shipped partners for {env!r} at {path}; run `transam partners train {env}`"
         )
-    return json.loads(path.read_text())
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise ManifestError(f"partner manifest {path} is unreadable: {err}") from None
+    if not isinstance(manifest, dict):
+        raise ManifestError(f"partner manifest {path} is not a JSON object")
+    return manifest
 
 
 def load_params(env: str, split: str = "default", root: Path | None = None) -> dict[str, Any]:

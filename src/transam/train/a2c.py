@@ -52,9 +52,15 @@ import optax
 from flax import struct
 
 from transam.envs.core import ControlledEnv, EnvState, PartnerRecord
-from transam.models.base import AgentModel, LocalStep, PartnerView, PrivilegedModel
+from transam.models.base import (
+    AgentModel,
+    LocalStep,
+    PartnerView,
+    partner_view,
+    run_embed,
+    run_step,
+)
 from transam.models.policy import Policy
-from transam.models.transam import TransAM
 from transam.train.config import TrainConfig
 
 Metrics = dict[str, jax.Array]
@@ -186,13 +192,6 @@ def batch_carry(carry: Any, n: int) -> Any:
     return jax.tree.map(lambda a: jnp.broadcast_to(a, (n, *jnp.shape(a))), carry)
 
 
-def partner_view(model: AgentModel, env_state: EnvState) -> PartnerView | None:
-    """The other agents' data at the current step, for a privileged model (Oracle) only."""
-    if not model.privileged:
-        return None
-    return PartnerView(env_state.other_obs, env_state.other_prev_actions)
-
-
 def model_step(
     model: AgentModel,
     params: Any,
@@ -201,16 +200,15 @@ def model_step(
     partner: PartnerView | None,
     key: jax.Array | None = None,
 ) -> tuple[Any, jax.Array]:
-    """``model.step`` on a batch; only a privileged model is handed the partner view. With a
-    ``key`` (``act_dropout``; TransAM family only) the model applies dropout, one key per env."""
-    if key is not None:
-        keys = jax.random.split(key, x.first.shape[0])
-        stochastic: Any = model
-        return jax.vmap(stochastic.step, in_axes=(None, 0, 0, 0))(params, carry, x, keys)
-    if partner is None:
-        return jax.vmap(model.step, in_axes=(None, 0, 0))(params, carry, x)
-    oracle: PrivilegedModel = model  # type: ignore[assignment]
-    return jax.vmap(oracle.step, in_axes=(None, 0, 0, 0))(params, carry, x, partner)
+    """``model.step`` on a batch (:func:`~transam.models.base.run_step`: only a privileged
+    model is handed the partner view). With a ``key`` (``act_dropout``) the model applies its
+    dropout, one key per env."""
+    keys = None if key is None else jax.random.split(key, x.first.shape[0])
+
+    def one(c: Any, x: LocalStep, view: PartnerView | None, k: jax.Array | None) -> Any:
+        return run_step(model, params, c, x, view, k)
+
+    return jax.vmap(one)(carry, x, partner, keys)
 
 
 def act(
@@ -509,12 +507,7 @@ def make_update(
     policy = make_policy(config, env)
     policy_tx, model_tx = make_optimizers(config)
     collect = make_collect(config, env, model)
-    # z_pass="shared": the policy loss's z comes from the agent-model loss's own pass, for the
-    # models that have one (the TransAM family); the others make a pass of their own.
-    shared_pass = config.z_from_loss_pass and hasattr(model, "loss_and_embed")
-    prior_k = 0
-    if isinstance(model, TransAM) and model.config.recon_at == "window":
-        prior_k = model.config.context - 1  # positions before a rollout get their targets
+    prior_k = model.prior_steps  # positions before a rollout that get their targets
 
     def prior_of(records: PartnerRecord, index: jax.Array) -> dict[str, Any]:
         """The targets of the window positions before rollout ``index`` (recon_at="window")."""
@@ -536,33 +529,28 @@ def make_update(
             z_keys = jax.random.split(jax.random.fold_in(key, 1), traj.x.first.shape[1])
 
         def embed(model_params: Any) -> jax.Array:
-            if traj.partner is not None:
-                oracle: PrivilegedModel = model  # type: ignore[assignment]
-                return jax.vmap(oracle.embed_rollout, in_axes=(None, 0, 1, 1), out_axes=1)(
-                    model_params, traj.model_carry0, traj.x, traj.partner
-                )
-            if z_keys is not None:
-                stochastic: Any = model
-                return jax.vmap(stochastic.embed_rollout, in_axes=(None, 0, 1, 0), out_axes=1)(
-                    model_params, traj.model_carry0, traj.x, z_keys
-                )
-            return jax.vmap(model.embed_rollout, in_axes=(None, 0, 1), out_axes=1)(
-                model_params, traj.model_carry0, traj.x
-            )
+            """z [T, N, ...] of the rollout by the training path (a privileged model also gets
+            the rollout's partner views; with ``z_keys``, dropout)."""
+
+            def one(c: Any, xs: LocalStep, views: PartnerView | None, k: Any) -> jax.Array:
+                return run_embed(model, model_params, c, xs, views, k)
+
+            fn = jax.vmap(one, in_axes=(0, 1, 1, 0), out_axes=1)
+            return fn(traj.model_carry0, traj.x, traj.partner, z_keys)
 
         def loss_fn(policy_params: Any, model_params: Any) -> tuple[jax.Array, Metrics]:
             model_args = (model_params, traj.model_carry0, traj.x, traj.record, key)
-            if shared_pass:  # z off the loss's own pass (the reference's one forward)
-                am, am_metrics, z_loss = model.loss_and_embed(*model_args, **prior)  # type: ignore[attr-defined]
+            am, am_metrics, z_loss = model.loss_and_embed(*model_args, **prior)
+            if config.z_from_loss_pass and z_loss is not None:
+                # z_pass="shared": z off the loss's own pass (the reference's one forward), for
+                # a model whose loss has one (the TransAM family)
                 z = jax.lax.stop_gradient(z_loss)
+            elif a.backprop_encoder:
+                z = embed(model_params)
+            elif a.recompute_z:  # the model's current parameters, no gradient into it
+                z = jax.lax.stop_gradient(embed(model_params))
             else:
-                am, am_metrics = model.loss(*model_args, **prior)
-                if a.backprop_encoder:
-                    z = embed(model_params)
-                elif a.recompute_z:  # the model's current parameters, no gradient into it
-                    z = jax.lax.stop_gradient(embed(model_params))
-                else:
-                    z = traj.z
+                z = traj.z
             terms = a2c_losses(
                 policy,
                 policy_params,

@@ -206,7 +206,7 @@ class TrainConfig:
     def z_from_loss_pass(self) -> bool:
         """Whether the policy loss's z is to come from the agent-model loss's own pass
         (``z_pass="shared"`` with ``recompute_z`` and without ``backprop_encoder``); the trainer
-        does so for the models that have such a pass (``loss_and_embed``)."""
+        does so for the models whose loss has such a pass (``loss_and_embed`` returns its z)."""
         a = self.a2c
         return a.recompute_z and not a.backprop_encoder and a.z_pass == "shared"
 

@@ -64,15 +64,22 @@ LEVEL_KEYS = ("action_ceiling", "memoryless_accuracy", "majority_rate")
 def partner_levels(envs: list[str], split: str = "default") -> dict[str, dict[str, Any] | None]:
     """Per env, the accuracy levels recorded in its shipped manifest's ``split`` entry
     (``diversity``: ceiling, memoryless level, majority rate, digest), or None when the
-    manifest has none (not recorded, or no shipped population)."""
-    from transam.partners.learned import load_manifest
+    manifest has none (not recorded, or no shipped population). A manifest that cannot be
+    read is an error naming the file (:class:`~transam.partners.learned.ManifestError`), not
+    "none recorded"."""
+    from transam.partners.learned import ManifestError, data_dir, load_manifest
 
     out: dict[str, dict[str, Any] | None] = {}
     for env in envs:
         try:
-            found = load_manifest(env)[split].get("diversity") or {}
-        except (FileNotFoundError, KeyError, ValueError):
-            found = {}
+            manifest = load_manifest(env)
+        except FileNotFoundError:  # no shipped population
+            manifest = {}
+        entry = manifest.get(split) or {}
+        found = (entry.get("diversity") or {}) if isinstance(entry, dict) else None
+        if not isinstance(found, dict):
+            path = data_dir(env) / "manifest.json"
+            raise ManifestError(f"partner manifest {path}: its {split!r} entry is damaged")
         ok = all(isinstance(found.get(k), int | float) for k in LEVEL_KEYS)
         keep = (
             *LEVEL_KEYS,
