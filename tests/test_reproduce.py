@@ -157,6 +157,29 @@ def test_a_carried_unfinished_run_resumes_on_a_new_machine(smoke: Path, tmp_path
     assert not (archive / spec.rel / "checkpoints").exists()
 
 
+def test_final_episodes_override_reevaluates_without_retraining(
+    smoke: Path, tmp_path: Path
+) -> None:
+    """--final-episodes evaluates finished runs again at the new count without training them
+    again, and grid.json keeps the count for later invocations that do not give it."""
+    out = tmp_path / "grid"
+    shutil.copytree(smoke, out)
+    one = ["--envs", "spread", "--methods", "nam", "--seeds", "0"]
+    run = out / grid.RunSpec("spread", "nam", 0).rel
+    metrics = (run / "metrics.jsonl").read_bytes()
+    main(["reproduce", "--budget", "smoke", "--out", str(out), "--jobs", "1", *one,
+          "--final-episodes", "39"])  # fmt: skip
+    saved = json.loads((out / "grid.json").read_text())
+    assert saved["budget_settings"]["final_episodes"] == 39
+    assert grid.grid_budget(saved).final_episodes == 39
+    for partners in EVAL_PARTNERS:
+        assert json.loads((run / f"eval_{partners}.json").read_text())["episodes"] == 39
+    assert (run / "metrics.jsonl").read_bytes() == metrics
+    evaluated = (run / "eval_train.json").read_bytes()
+    main(["reproduce", "--budget", "smoke", "--out", str(out), "--jobs", "1", *one])
+    assert (run / "eval_train.json").read_bytes() == evaluated
+
+
 def test_bad_grid_arguments_fail_before_writing(tmp_path: Path, capsys) -> None:
     out = tmp_path / "g"
     with pytest.raises(SystemExit):
@@ -164,4 +187,6 @@ def test_bad_grid_arguments_fail_before_writing(tmp_path: Path, capsys) -> None:
     assert "lima" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="distinct"):
         main(["reproduce", "--budget", "smoke", "--out", str(out), "--seeds", "0", "0"])
+    with pytest.raises(SystemExit, match="final_episodes must be >= 1, got 0"):
+        main(["reproduce", "--budget", "smoke", "--out", str(out), "--final-episodes", "0"])
     assert not out.exists()

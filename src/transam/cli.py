@@ -400,6 +400,9 @@ class Reproduce:
     """the partner population every run trains against: default, heldout, or a population
     directory (manifest.json + default.safetensors; its one env only), e.g. the authors' own
     Spread population from `transam partners import-authors`"""
+    final_episodes: int | None = None
+    """episodes of each run's final evaluations (default: the budget's); recorded in the
+    grid, and runs evaluated with another count are evaluated again"""
 
     def run(self) -> None:
         from transam.compose import make_env, resolve_partners
@@ -420,7 +423,11 @@ class Reproduce:
             from transam.reproduce.grid_ray import connect
 
             connect(address)
-        grid.open_grid(out, self.budget, specs, ["transam", *_ARGV], partners)
+        budget = grid.grid_budget(
+            grid.open_grid(
+                out, self.budget, specs, ["transam", *_ARGV], partners, self.final_episodes
+            )
+        )
         console.print(
             f"{len(specs)} runs ({len(self.envs)} envs x {len(self.methods)} methods x "
             f"{len(seeds)} seeds), budget {self.budget!r} "

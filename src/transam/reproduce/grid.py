@@ -140,7 +140,8 @@ def read_launches(out: str | Path, spec: RunSpec) -> list[dict[str, Any]]:
 
 def run_one(out: str | Path, spec: RunSpec, budget: Budget) -> dict[str, Any]:
     """Train (or resume, or skip) one grid run, then evaluate it on the training and held-out
-    partners where not done yet. Safe to call again after any failure; returns a summary."""
+    partners where not done yet at the budget's final episode count. Safe to call again after
+    any failure; returns a summary."""
     from transam.evaluation.final import evaluate_run
     from transam.rundir import EVAL_PARTNERS, checkpoints, evaluation_path
     from transam.train.loop import train
@@ -170,7 +171,8 @@ def run_one(out: str | Path, spec: RunSpec, budget: Budget) -> dict[str, Any]:
             raise RuntimeError(f"{spec.name}: training stopped before the end")
     evaluated = []
     for partners in EVAL_PARTNERS:
-        if not evaluation_path(run_dir, partners).exists():
+        path = evaluation_path(run_dir, partners)
+        if not path.exists() or json.loads(path.read_text())["episodes"] != budget.final_episodes:
             evaluate_run(run_dir, episodes=budget.final_episodes, partners=partners)
             evaluated.append(partners)
     if not finished or evaluated:
@@ -257,12 +259,16 @@ def open_grid(
     specs: list[RunSpec],
     argv: list[str],
     partners: str = "default",
+    final_episodes: int | None = None,
 ) -> dict[str, Any]:
     """Create or extend ``grid.json``; a grid directory keeps one budget and one partner
     population (``partners``: a shipped choice, or a population directory as an absolute
-    path)."""
+    path). ``final_episodes`` replaces the budget's final-evaluation episode count from now on
+    (it stays recorded in grid.json for later invocations; see :func:`grid_budget`)."""
     if budget_name not in BUDGETS:
         raise ConfigError(f"unknown budget {budget_name!r}; valid choices: {', '.join(BUDGETS)}")
+    if final_episodes is not None and final_episodes < 1:
+        raise ConfigError(f"final_episodes must be >= 1, got {final_episodes!r}")
     from transam.rundir import write_json
 
     path = out / "grid.json"
@@ -288,6 +294,8 @@ def open_grid(
             "runs": [],
             "invocations": [],
         }
+    if final_episodes is not None:
+        grid["budget_settings"]["final_episodes"] = final_episodes
     known = {r for r in grid["runs"]}
     grid["runs"] += [s.rel for s in specs if s.rel not in known]
     grid["invocations"].append(
@@ -296,6 +304,15 @@ def open_grid(
     out.mkdir(parents=True, exist_ok=True)
     write_json(path, grid)
     return grid
+
+
+def grid_budget(grid: dict[str, Any]) -> Budget:
+    """The budget a grid runs: its named budget, with the final-evaluation episode count that
+    grid.json records (a `--final-episodes` given once holds for the grid's later
+    invocations)."""
+    recorded = grid.get("budget_settings", {}).get("final_episodes")
+    budget = BUDGETS[grid["budget"]]
+    return budget if recorded is None else dataclasses.replace(budget, final_episodes=recorded)
 
 
 def close_grid(out: Path, failures: list[str]) -> None:
