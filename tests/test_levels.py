@@ -197,3 +197,8 @@ def test_measure_and_record_what_the_diversity_command_prints(
     env_name, split, entry = stored["args"]
     assert (env_name, split, entry["window"]) == ("spread", "default", 3)
     assert entry["levels_settings"]["train_steps"] == 50
+    # the window level: the MLP on the agent's last `window` observations (TransAM's context)
+    assert levels.window == 5 and entry["levels_settings"]["window"] == 5
+    window = found.levels["memoryless_window"]
+    assert entry["memoryless_window_accuracy"] == round(window, 4)
+    assert len(entry["memoryless_window_accuracy_by_step"]) == env.spec.episode_len

@@ -335,6 +335,9 @@ def _print_showcase(env: str, episodes: int) -> None:
         own2 = shown.levels.get("memoryless_own2_accuracy")
         if own2 is not None:
             table.add_row("memoryless, 2 steps", "-", "-", "-", "-", f"{own2:.3f}")
+        window = shown.levels.get("memoryless_window_accuracy")
+        if window is not None:
+            table.add_row("memoryless, window", "-", "-", "-", "-", f"{window:.3f}")
         table.add_row("ceiling", "-", "-", "-", "-", f"{shown.levels['action_ceiling']:.3f}")
     console.print(table)
     for name in shown.runs:  # how each was trained: budgets and settings differ
@@ -345,6 +348,7 @@ def _print_showcase(env: str, episodes: int) -> None:
     by_step = {
         "memoryless": levels.get("memoryless_own_accuracy_by_step") or [],
         "2 steps": levels.get("memoryless_own2_accuracy_by_step") or [],
+        "window": levels.get("memoryless_window_accuracy_by_step") or [],
     }
     for name, res in shown.runs.items():
         curve = accuracy_by_step(res)
@@ -352,7 +356,8 @@ def _print_showcase(env: str, episodes: int) -> None:
             steps = Table(
                 title=f"{name}: partner-action accuracy by step of the episode",
                 caption="memoryless: the population's recorded level at that step from the "
-                "agent's current observation (2 steps: and its previous one), random "
+                "agent's current observation (2 steps: and its previous one; window: its last "
+                "five, TransAM's window), random "
                 "controlled agent; early steps are easier to predict without history",
             )
             steps.add_column("t")
@@ -867,9 +872,18 @@ class PartnersDiversity:
             f"{levels['memoryless_own2']:.3f}",
             "the same from its current and previous obs (the partners' velocities readable)",
         )
+        table.add_row(
+            f"memoryless (own view, {lv_cfg.window} steps)",
+            f"{levels['memoryless_window']:.3f}",
+            "the same from its last obs in the agent model's window",
+        )
         table.add_row("majority", f"{levels['majority']:.3f}", "each slot's most frequent action")
         console.print(table)
-        for key, what in (("own", "own view"), ("own2", "own view, 2 steps")):
+        for key, what in (
+            ("own", "own view"),
+            ("own2", "own view, 2 steps"),
+            ("window", f"own view, {lv_cfg.window} steps"),
+        ):
             console.print(
                 f"memoryless ({what}) by step of the episode: "
                 + " ".join(

@@ -208,6 +208,9 @@ class LevelsConfig:
     """whole episodes per team instead of ``steps_per_team``'s (at least 4)"""
     samples: int = 64
     """draws of ``act`` per observation for a member without declared probabilities"""
+    window: int = 5
+    """K of the window level: the controlled agent's last K observations (view ``ownK``), the
+    window TransAM's encoder reads by default (its ``context``)"""
     hidden: int = 128
     train_steps: int = 20_000
     lr: float = 1e-3
@@ -414,6 +417,7 @@ def action_levels(
     memoryless = memoryless_accuracy(steps, num_actions, cfg)
     own = memoryless_accuracy(steps, num_actions, cfg, view="own")
     own2 = memoryless_accuracy(steps, num_actions, cfg, view="own2")
+    window = memoryless_accuracy(steps, num_actions, cfg, view=f"own{cfg.window}")
     return {
         **ceiling,
         "memoryless": memoryless["accuracy"],
@@ -421,6 +425,8 @@ def action_levels(
         "memoryless_own_by_step": own["by_step"],
         "memoryless_own2": own2["accuracy"],
         "memoryless_own2_by_step": own2["by_step"],
+        "memoryless_window": window["accuracy"],
+        "memoryless_window_by_step": window["by_step"],
         "majority": memoryless["majority"],
         "steps": int(steps.live.sum()) * steps.obs.shape[2],
         "episodes_per_team": episodes,
@@ -456,6 +462,8 @@ def diversity_record(
         "memoryless_own_accuracy_by_step": _rounded(levels["memoryless_own_by_step"]),
         "memoryless_own2_accuracy": round(levels["memoryless_own2"], 4),
         "memoryless_own2_accuracy_by_step": _rounded(levels["memoryless_own2_by_step"]),
+        "memoryless_window_accuracy": round(levels["memoryless_window"], 4),
+        "memoryless_window_accuracy_by_step": _rounded(levels["memoryless_window_by_step"]),
         "majority_rate": round(levels["majority"], 4),
         "member_ceilings": {n: round(v, 4) for n, v in levels["members"].items()},
         "ceiling_sampled": levels["sampled"],

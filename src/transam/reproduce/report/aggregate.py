@@ -27,6 +27,13 @@ CURVE_METRICS = ("return", ACC_NEWEST, "obs_mse")
 TRAIN_CURVE_METRICS = (ACC_NEWEST, ACC_ALL)
 """Curves of the training batches' metrics (``train/``; the authors chart all-positions)."""
 MEMORYLESS_BY_STEP = "memoryless_own_accuracy_by_step"
+LEVELS_BY_STEP = (
+    (MEMORYLESS_BY_STEP, "one step"),
+    ("memoryless_own2_accuracy_by_step", "two steps"),
+    ("memoryless_window_accuracy_by_step", "window"),
+)
+"""The recorded per-step memoryless levels a per-step accuracy curve is drawn against (from the
+controlled agent's last one, two and window's observations)."""
 """The recorded level (``transam partners diversity --record``) the accuracy gain is read over."""
 PER_STEP_METRICS = ("cum_return", ACC_NEWEST, ACC_ALL, "obs_mse")
 SOURCE_EVAL = "final evaluation"

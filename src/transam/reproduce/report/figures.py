@@ -17,7 +17,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from transam.registry import display, env_title, method_entry, method_names
-from transam.reproduce.report.aggregate import ACC_NEWEST, MEMORYLESS_BY_STEP
+from transam.reproduce.report.aggregate import ACC_NEWEST, LEVELS_BY_STEP
 from transam.reproduce.report.load import METHOD_ORDER, RunData
 from transam.rundir import write_atomic
 
@@ -150,11 +150,17 @@ def episode_evolution(
                 ax = axes[i, j]
                 if key in per_step:
                     _band(ax, per_step[key]["t"], per_step[key], display(method), **style)
-                    level = ((levels or {}).get(env) or {}).get(MEMORYLESS_BY_STEP)
-                    if key == ACC_NEWEST and level:
+                    recorded = (levels or {}).get(env) or {}
+                    drawn = [
+                        (recorded[k], name)
+                        for k, name in LEVELS_BY_STEP
+                        if recorded.get(k) and key == ACC_NEWEST
+                    ]
+                    for (level, name), ls in zip(drawn, (":", "--", "-."), strict=False):
                         y = [np.nan if v is None else v for v in level]
-                        ax.plot(range(len(y)), y, color="black", linestyle=":", label="memoryless")
-                        ax.legend(loc="best", fontsize="small")
+                        ax.plot(range(len(y)), y, color="black", linestyle=ls, lw=0.8, label=name)
+                    if drawn:
+                        ax.legend(loc="best", fontsize="small", title="memoryless")
                 else:
                     ax.text(
                         0.5,

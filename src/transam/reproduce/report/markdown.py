@@ -137,6 +137,7 @@ def _levels_md(table: Table, levels: dict[str, dict[str, Any] | None]) -> list[s
         ("memoryless_accuracy", "memoryless, team-agnostic"),
         ("memoryless_own_accuracy", "memoryless, controlled agent's view"),
         ("memoryless_own2_accuracy", "the same from two steps (partners' velocities)"),
+        ("memoryless_window_accuracy", "the same from TransAM's window (five steps)"),
         ("majority_rate", "majority action"),
     ):
         cells = [

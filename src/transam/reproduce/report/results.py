@@ -87,6 +87,8 @@ def partner_levels(envs: list[str], split: str = "default") -> dict[str, dict[st
             "memoryless_own2_accuracy",
             aggregate.MEMORYLESS_BY_STEP,
             "memoryless_own2_accuracy_by_step",
+            "memoryless_window_accuracy",
+            "memoryless_window_accuracy_by_step",
             "population_digest",
             "measured_by",
         )
