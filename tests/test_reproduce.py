@@ -157,11 +157,10 @@ def test_a_carried_unfinished_run_resumes_on_a_new_machine(smoke: Path, tmp_path
     assert not (archive / spec.rel / "checkpoints").exists()
 
 
-def test_final_episodes_override_reevaluates_without_retraining(
-    smoke: Path, tmp_path: Path
-) -> None:
+def test_budget_overrides_reevaluate_without_retraining(smoke: Path, tmp_path: Path) -> None:
     """--final-episodes evaluates finished runs again at the new count without training them
-    again, and grid.json keeps the count for later invocations that do not give it."""
+    again, and grid.json keeps the count for later invocations that do not give it;
+    --total-steps sets a new grid's run length and is refused for one that has another."""
     out = tmp_path / "grid"
     shutil.copytree(smoke, out)
     one = ["--envs", "spread", "--methods", "nam", "--seeds", "0"]
@@ -178,6 +177,16 @@ def test_final_episodes_override_reevaluates_without_retraining(
     evaluated = (run / "eval_train.json").read_bytes()
     main(["reproduce", "--budget", "smoke", "--out", str(out), "--jobs", "1", *one])
     assert (run / "eval_train.json").read_bytes() == evaluated
+    # A grid's run length is fixed once it has runs; a new grid may set its own.
+    saved = json.loads((out / "grid.json").read_text())
+    with pytest.raises(SystemExit, match="holds a grid of 1,000 steps"):
+        main(["reproduce", "--budget", "smoke", "--out", str(out), *one, "--total-steps", "2000"])
+    assert json.loads((out / "grid.json").read_text()) == saved
+    spec = grid.RunSpec("spread", "nam", 0)
+    longer = grid.open_grid(tmp_path / "new", "smoke", [spec], [], overrides={"total_steps": 2000})
+    budget = grid.grid_budget(longer)
+    assert (budget.total_steps, budget.final_episodes) == (2000, 26)
+    assert grid.run_config(spec, budget, tmp_path / "new").total_steps == 2000
 
 
 def test_bad_grid_arguments_fail_before_writing(tmp_path: Path, capsys) -> None:

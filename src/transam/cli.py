@@ -405,6 +405,9 @@ class Reproduce:
     """the partner population every run trains against: default, heldout, or a population
     directory (manifest.json + default.safetensors; its one env only), e.g. the authors' own
     Spread population from `transam partners import-authors`"""
+    total_steps: int | None = None
+    """steps of each run (default: the budget's); a new grid only, recorded in it (e.g. an
+    environment that needs more than the budget's steps to learn)"""
     final_episodes: int | None = None
     """episodes of each run's final evaluations (default: the budget's); recorded in the
     grid, and runs evaluated with another count are evaluated again"""
@@ -428,11 +431,9 @@ class Reproduce:
             from transam.reproduce.grid_ray import connect
 
             connect(address)
-        budget = grid.grid_budget(
-            grid.open_grid(
-                out, self.budget, specs, ["transam", *_ARGV], partners, self.final_episodes
-            )
-        )
+        overrides = {"total_steps": self.total_steps, "final_episodes": self.final_episodes}
+        opened = grid.open_grid(out, self.budget, specs, ["transam", *_ARGV], partners, overrides)
+        budget = grid.grid_budget(opened)
         console.print(
             f"{len(specs)} runs ({len(self.envs)} envs x {len(self.methods)} methods x "
             f"{len(seeds)} seeds), budget {self.budget!r} "

@@ -253,22 +253,33 @@ def grid_partners(out: str | Path) -> str:
     return json.loads(path.read_text()).get("partners", "default") if path.exists() else "default"
 
 
+OVERRIDABLE = ("total_steps", "final_episodes")
+"""The budget settings a grid may change (``transam reproduce --total-steps/--final-episodes``;
+recorded in grid.json, see :func:`grid_budget`)."""
+
+
 def open_grid(
     out: Path,
     budget_name: str,
     specs: list[RunSpec],
     argv: list[str],
     partners: str = "default",
-    final_episodes: int | None = None,
+    overrides: dict[str, int | None] | None = None,
 ) -> dict[str, Any]:
     """Create or extend ``grid.json``; a grid directory keeps one budget and one partner
     population (``partners``: a shipped choice, or a population directory as an absolute
-    path). ``final_episodes`` replaces the budget's final-evaluation episode count from now on
-    (it stays recorded in grid.json for later invocations; see :func:`grid_budget`)."""
+    path). ``overrides`` (None values ignored) replace budget settings of :data:`OVERRIDABLE`
+    and stay recorded for later invocations: ``final_episodes`` at any time (runs evaluated at
+    another count are evaluated again), ``total_steps`` only for a new grid (its runs must share
+    one length)."""
     if budget_name not in BUDGETS:
         raise ConfigError(f"unknown budget {budget_name!r}; valid choices: {', '.join(BUDGETS)}")
-    if final_episodes is not None and final_episodes < 1:
-        raise ConfigError(f"final_episodes must be >= 1, got {final_episodes!r}")
+    given = {k: v for k, v in (overrides or {}).items() if v is not None}
+    for key, value in given.items():
+        if key not in OVERRIDABLE:
+            raise ConfigError(f"unknown budget override {key!r}; valid: {', '.join(OVERRIDABLE)}")
+        if value < 1:
+            raise ConfigError(f"{key} must be >= 1, got {value!r}")
     from transam.rundir import write_json
 
     path = out / "grid.json"
@@ -284,6 +295,12 @@ def open_grid(
                 f"--out {str(out)!r} holds a grid against partners "
                 f"{grid.get('partners', 'default')!r}; use another --out for partners {partners!r}"
             )
+        steps = grid["budget_settings"]["total_steps"]
+        if given.get("total_steps", steps) != steps:
+            raise ConfigError(
+                f"--out {str(out)!r} holds a grid of {steps:,} steps a run; use another --out "
+                f"for total_steps {given['total_steps']:,}"
+            )
     elif out.exists() and any(out.iterdir()):
         raise ConfigError(f"--out {str(out)!r} is not empty and holds no grid; choose another")
     else:
@@ -294,8 +311,7 @@ def open_grid(
             "runs": [],
             "invocations": [],
         }
-    if final_episodes is not None:
-        grid["budget_settings"]["final_episodes"] = final_episodes
+    grid["budget_settings"].update(given)
     known = {r for r in grid["runs"]}
     grid["runs"] += [s.rel for s in specs if s.rel not in known]
     grid["invocations"].append(
@@ -307,12 +323,11 @@ def open_grid(
 
 
 def grid_budget(grid: dict[str, Any]) -> Budget:
-    """The budget a grid runs: its named budget, with the final-evaluation episode count that
-    grid.json records (a `--final-episodes` given once holds for the grid's later
-    invocations)."""
-    recorded = grid.get("budget_settings", {}).get("final_episodes")
-    budget = BUDGETS[grid["budget"]]
-    return budget if recorded is None else dataclasses.replace(budget, final_episodes=recorded)
+    """The budget a grid runs: its named budget with the settings of :data:`OVERRIDABLE` that
+    grid.json records (an override given once holds for the grid's later invocations)."""
+    recorded = grid.get("budget_settings", {})
+    kept = {k: recorded[k] for k in OVERRIDABLE if k in recorded}
+    return dataclasses.replace(BUDGETS[grid["budget"]], **kept)
 
 
 def close_grid(out: Path, failures: list[str]) -> None:
