@@ -179,13 +179,15 @@ def test_budget_overrides_reevaluate_without_retraining(smoke: Path, tmp_path: P
     assert (run / "eval_train.json").read_bytes() == evaluated
     # A grid's run length is fixed once it has runs; a new grid may set its own.
     saved = json.loads((out / "grid.json").read_text())
-    with pytest.raises(SystemExit, match="holds a grid of 1,000 steps"):
+    with pytest.raises(SystemExit, match="holds a grid with total_steps 1,000"):
         main(["reproduce", "--budget", "smoke", "--out", str(out), *one, "--total-steps", "2000"])
     assert json.loads((out / "grid.json").read_text()) == saved
     spec = grid.RunSpec("spread", "nam", 0)
-    longer = grid.open_grid(tmp_path / "new", "smoke", [spec], [], overrides={"total_steps": 2000})
-    budget = grid.grid_budget(longer)
-    assert (budget.total_steps, budget.final_episodes) == (2000, 26)
+    changes = {"total_steps": 2000, "evals": 4, "eval_episodes": None}
+    budget = grid.grid_budget(
+        grid.open_grid(tmp_path / "new", "smoke", [spec], [], "default", changes)
+    )
+    assert (budget.total_steps, budget.evals, budget.eval_episodes) == (2000, 4, 8)
     assert grid.run_config(spec, budget, tmp_path / "new").total_steps == 2000
 
 

@@ -408,6 +408,10 @@ class Reproduce:
     total_steps: int | None = None
     """steps of each run (default: the budget's); a new grid only, recorded in it (e.g. an
     environment that needs more than the budget's steps to learn)"""
+    evals: int | None = None
+    """evaluations during each run (default: the budget's); a new grid only"""
+    eval_episodes: int | None = None
+    """episodes per evaluation during training (default: the budget's); a new grid only"""
     final_episodes: int | None = None
     """episodes of each run's final evaluations (default: the budget's); recorded in the
     grid, and runs evaluated with another count are evaluated again"""
@@ -431,7 +435,12 @@ class Reproduce:
             from transam.reproduce.grid_ray import connect
 
             connect(address)
-        overrides = {"total_steps": self.total_steps, "final_episodes": self.final_episodes}
+        overrides = {
+            "total_steps": self.total_steps,
+            "evals": self.evals,
+            "eval_episodes": self.eval_episodes,
+            "final_episodes": self.final_episodes,
+        }
         opened = grid.open_grid(out, self.budget, specs, ["transam", *_ARGV], partners, overrides)
         budget = grid.grid_budget(opened)
         console.print(

@@ -253,9 +253,9 @@ def grid_partners(out: str | Path) -> str:
     return json.loads(path.read_text()).get("partners", "default") if path.exists() else "default"
 
 
-OVERRIDABLE = ("total_steps", "final_episodes")
-"""The budget settings a grid may change (``transam reproduce --total-steps/--final-episodes``;
-recorded in grid.json, see :func:`grid_budget`)."""
+OVERRIDABLE = ("total_steps", "evals", "eval_episodes", "final_episodes")
+"""The budget settings a grid may change (``transam reproduce --total-steps`` etc.; recorded
+in grid.json, see :func:`grid_budget`): all but the last only when the grid is new."""
 
 
 def open_grid(
@@ -270,8 +270,8 @@ def open_grid(
     population (``partners``: a shipped choice, or a population directory as an absolute
     path). ``overrides`` (None values ignored) replace budget settings of :data:`OVERRIDABLE`
     and stay recorded for later invocations: ``final_episodes`` at any time (runs evaluated at
-    another count are evaluated again), ``total_steps`` only for a new grid (its runs must share
-    one length)."""
+    another count are evaluated again), the training settings only for a new grid (its runs
+    must share them)."""
     if budget_name not in BUDGETS:
         raise ConfigError(f"unknown budget {budget_name!r}; valid choices: {', '.join(BUDGETS)}")
     given = {k: v for k, v in (overrides or {}).items() if v is not None}
@@ -295,12 +295,13 @@ def open_grid(
                 f"--out {str(out)!r} holds a grid against partners "
                 f"{grid.get('partners', 'default')!r}; use another --out for partners {partners!r}"
             )
-        steps = grid["budget_settings"]["total_steps"]
-        if given.get("total_steps", steps) != steps:
-            raise ConfigError(
-                f"--out {str(out)!r} holds a grid of {steps:,} steps a run; use another --out "
-                f"for total_steps {given['total_steps']:,}"
-            )
+        for key in OVERRIDABLE[:-1]:
+            had = grid["budget_settings"][key]
+            if given.get(key, had) != had:
+                raise ConfigError(
+                    f"--out {str(out)!r} holds a grid with {key} {had:,}; use another --out for "
+                    f"{key} {given[key]:,}"
+                )
     elif out.exists() and any(out.iterdir()):
         raise ConfigError(f"--out {str(out)!r} is not empty and holds no grid; choose another")
     else:
