@@ -55,8 +55,10 @@ def test_bad_values_are_rejected_with_the_valid_choices(
         main(["partners", "diversity", "spread", "--window", "26"])
     with pytest.raises(SystemExit, match=r"unknown partners '/nope'; valid choices: default"):
         main(["partners", "diversity", "spread", "--population", "/nope"])
-    with pytest.raises(SystemExit, match=r"--population .* takes none of --heldout, --record"):
-        main(["partners", "diversity", "spread", "--population", "/nope", "--record"])
+    with pytest.raises(SystemExit, match=r"--population measures that directory's .* no --heldout"):
+        main(["partners", "diversity", "spread", "--population", "/nope", "--heldout"])
+    with pytest.raises(SystemExit, match=r"--heuristic .* takes none of --heldout, --record"):
+        main(["partners", "diversity", "spread", "--heuristic", "--record"])
     with pytest.raises(SystemExit, match="--agent landmark is a Spread rule; pass ENV spread"):
         main(["partners", "diversity", "tag", "--agent", "landmark"])
     with pytest.raises(SystemExit, match=r"--levels-episodes must be >= 2 .* got 1"):

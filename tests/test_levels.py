@@ -3,6 +3,9 @@ E[max_a pi(a|o)] and the memoryless team-agnostic level, on constructed populati
 
 from __future__ import annotations
 
+import shutil
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -19,6 +22,7 @@ from transam.partners.diversity import (
     own_window,
 )
 from transam.partners.train import select, select_probs
+from transam.reproduce.report.results import partner_levels
 
 FIXED = jnp.array([0.7, 0.1, 0.1, 0.05, 0.05])
 
@@ -178,7 +182,7 @@ def test_own_window_is_the_observation_and_its_successive_changes() -> None:
 
 
 def test_measure_and_record_what_the_diversity_command_prints(
-    monkeypatch: pytest.MonkeyPatch,
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     """``transam partners diversity`` is argument checks and printing around
     :func:`diversity.measure` (no cross-play for a population that is not a shipped learned
@@ -194,9 +198,21 @@ def test_measure_and_record_what_the_diversity_command_prints(
     stored: dict = {}
     monkeypatch.setattr(learned, "record_diversity", lambda *a: stored.update(args=a))
     diversity.record("spread", False, found)
-    env_name, split, entry = stored["args"]
-    assert (env_name, split, entry["window"]) == ("spread", "default", 3)
+    env_name, split, entry, into = stored["args"]
+    assert (env_name, split, entry["window"], into) == ("spread", "default", 3, None)
     assert entry["levels_settings"]["train_steps"] == 50
+    # A population directory keeps its own record, where `transam report` finds a grid's
+    # levels; the shipped manifest is untouched.
+    shipped = (learned.data_dir("spread") / "manifest.json").read_bytes()
+    root = tmp_path / "pop"
+    shutil.copytree(learned.data_dir("spread"), root)
+    monkeypatch.undo()
+    assert diversity.record("spread", False, found, root) == root / "manifest.json"
+    kept = partner_levels(["spread"], "default", root)["spread"]
+    assert kept is not None and kept["memoryless_accuracy"] == entry["memoryless_accuracy"]
+    assert kept["memoryless_window_accuracy"] == entry["memoryless_window_accuracy"]
+    assert kept["measured_by"].endswith(f"--population {root}")
+    assert (learned.data_dir("spread") / "manifest.json").read_bytes() == shipped
     # the window level: the MLP on the agent's last `window` observations (TransAM's context)
     assert levels.window == 5 and entry["levels_settings"]["window"] == 5
     window = found.levels["memoryless_window"]

@@ -796,7 +796,9 @@ class PartnersDiversity:
     """the controlled agent while measuring the accuracy levels: uniformly random, or (Spread)
     the landmark rule, to see how much the levels depend on the states it visits"""
     window: int = 10  # steps per classifier sample
-    record: bool = False  # store the results in the shipped manifest (docs/partners.md quotes it)
+    record: bool = False
+    """store the results in the shipped manifest (docs/partners.md quotes it), or in the
+    --population directory's (`transam report` reads a grid's levels there)"""
     levels_episodes: int | None = None
     """episodes per team for the accuracy levels (default: LevelsConfig's 25,600 steps' worth,
     1,024 on Spread). The levels are fits of an MLP, so lower bounds: less data (and fewer
@@ -811,11 +813,14 @@ class PartnersDiversity:
         from transam.partners import diversity, learned
 
         other = "--heuristic" if self.heuristic else "--population" if self.population else None
-        if other and (self.heldout or self.record or (self.heuristic and self.population)):
+        if self.heuristic and (self.heldout or self.record or self.population):
             raise SystemExit(
-                f"error: {other} measures a population without an entry in the shipped "
-                "manifest: it takes none of --heldout, --record, and not both --heuristic and "
-                "--population"
+                "error: --heuristic measures the scripted population, which has no manifest: "
+                "it takes none of --heldout, --record, --population"
+            )
+        if self.population and self.heldout:
+            raise SystemExit(
+                "error: --population measures that directory's one population: no --heldout"
             )
         if self.levels_steps is not None:
             _check_positive(levels_steps=self.levels_steps)
@@ -911,7 +916,8 @@ class PartnersDiversity:
             f"partner steps, {self.agent} controlled agent"
         )
         if self.record:
-            console.print(f"recorded in {diversity.record(self.env, self.heldout, found)}")
+            root = Path(self.population) if self.population else None
+            console.print(f"recorded in {diversity.record(self.env, self.heldout, found, root)}")
 
 
 @dataclass

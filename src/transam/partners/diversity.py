@@ -444,11 +444,14 @@ def diversity_record(
     acc: dict[str, Any],
     levels: dict[str, Any],
     lv_cfg: LevelsConfig,
+    root: Path | None = None,
 ) -> dict[str, Any]:
-    """What ``transam partners diversity ENV --record`` stores in the shipped manifest (the
-    README and the report quote it): the classifier accuracies of
-    :func:`partner_id_accuracy` and the levels of :func:`action_levels`, rounded."""
+    """What ``transam partners diversity ENV --record`` stores in the shipped manifest, or in
+    the manifest of the population directory ``root`` (the README and the report quote it):
+    the classifier accuracies of :func:`partner_id_accuracy` and the levels of
+    :func:`action_levels`, rounded."""
     split = "heldout" if heldout else "default"
+    command = f"transam partners diversity {env}" + (" --heldout" if heldout else "")
     return {
         "partner_id_accuracy_others": round(acc["others"], 3),
         "partner_id_accuracy_local": round(acc["local"], 3),
@@ -468,8 +471,8 @@ def diversity_record(
         "member_ceilings": {n: round(v, 4) for n, v in levels["members"].items()},
         "ceiling_sampled": levels["sampled"],
         "levels_settings": {**asdict(lv_cfg), "episodes_per_team": levels["episodes_per_team"]},
-        "measured_by": f"transam partners diversity {env}" + (" --heldout" if heldout else ""),
-        "population_digest": learned.digest(env, split),
+        "measured_by": command + (f" --population {root}" if root else ""),
+        "population_digest": learned.digest(env, split, root),
     }
 
 
@@ -533,11 +536,11 @@ def measure(
     )
 
 
-def record(env: str, heldout: bool, found: Diversity) -> Path:
-    """Store ``found`` (of the shipped ``env`` split) in the shipped manifest, as
-    :func:`diversity_record`; returns the manifest's path."""
+def record(env: str, heldout: bool, found: Diversity, root: Path | None = None) -> Path:
+    """Store ``found`` (of the shipped ``env`` split, or of the population directory ``root``)
+    in its manifest, as :func:`diversity_record`; returns the manifest's path."""
     entry = diversity_record(
-        env, heldout, found.window, found.accuracy, found.levels, found.levels_config
+        env, heldout, found.window, found.accuracy, found.levels, found.levels_config, root
     )
-    learned.record_diversity(env, "heldout" if heldout else "default", entry)
-    return learned.data_dir(env) / "manifest.json"
+    learned.record_diversity(env, "heldout" if heldout else "default", entry, root)
+    return (root or learned.data_dir(env)) / "manifest.json"

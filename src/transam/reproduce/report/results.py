@@ -8,6 +8,7 @@ from __future__ import annotations
 import datetime as dt
 import shlex
 from collections import Counter
+from pathlib import Path
 from typing import Any
 
 from transam import registry
@@ -61,24 +62,26 @@ LEVEL_KEYS = ("action_ceiling", "memoryless_accuracy", "majority_rate")
 """What ``transam partners diversity --record`` stores about the partners' actions."""
 
 
-def partner_levels(envs: list[str], split: str = "default") -> dict[str, dict[str, Any] | None]:
-    """Per env, the accuracy levels recorded in its shipped manifest's ``split`` entry
-    (``diversity``: ceiling, memoryless level, majority rate, digest), or None when the
-    manifest has none (not recorded, or no shipped population). A manifest that cannot be
-    read is an error naming the file (:class:`~transam.partners.learned.ManifestError`), not
-    "none recorded"."""
+def partner_levels(
+    envs: list[str], split: str = "default", root: Path | None = None
+) -> dict[str, dict[str, Any] | None]:
+    """Per env, the accuracy levels recorded in its shipped manifest's ``split`` entry (or in
+    the population directory ``root``'s manifest) (``diversity``: ceiling, memoryless level,
+    majority rate, digest), or None when the manifest has none (not recorded, or no shipped
+    population). A manifest that cannot be read is an error naming the file
+    (:class:`~transam.partners.learned.ManifestError`), not "none recorded"."""
     from transam.partners.learned import ManifestError, data_dir, load_manifest
 
     out: dict[str, dict[str, Any] | None] = {}
     for env in envs:
         try:
-            manifest = load_manifest(env)
+            manifest = load_manifest(env, root)
         except FileNotFoundError:  # no shipped population
             manifest = {}
         entry = manifest.get(split) or {}
         found = (entry.get("diversity") or {}) if isinstance(entry, dict) else None
         if not isinstance(found, dict):
-            path = data_dir(env) / "manifest.json"
+            path = (root or data_dir(env)) / "manifest.json"
             raise ManifestError(f"partner manifest {path}: its {split!r} entry is damaged")
         ok = all(isinstance(found.get(k), int | float) for k in LEVEL_KEYS)
         keep = (
@@ -169,13 +172,19 @@ def marl_eval(grid: Grid) -> dict[str, Any]:
 
 
 def grid_levels(grid: Grid) -> dict[str, dict[str, Any] | None]:
-    """The recorded levels of the population each env of ``grid`` trained against (None for
-    partners without a manifest entry: the scripted or the authors' populations)."""
+    """The recorded levels of the population each env of ``grid`` trained against: a shipped
+    split's, or a population directory's (``transam partners diversity --population DIR
+    --record``); None where none are recorded (the scripted population, a directory that is
+    gone or holds none)."""
+    from transam.partners.learned import is_population_dir
+
     envs = sorted({r.env for r in grid.runs})
     split = grid.info.get("partners", "default")
-    if split not in ("default", "heldout"):
-        return {e: None for e in envs}
-    return partner_levels(envs, split)
+    if split in ("default", "heldout"):
+        return partner_levels(envs, split)
+    if is_population_dir(split):
+        return partner_levels(envs, "default", Path(split))
+    return {e: None for e in envs}
 
 
 def build_results(
