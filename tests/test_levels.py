@@ -212,6 +212,7 @@ def test_measure_and_record_what_the_diversity_command_prints(
     assert kept is not None and kept["memoryless_accuracy"] == entry["memoryless_accuracy"]
     assert kept["memoryless_window_accuracy"] == entry["memoryless_window_accuracy"]
     assert kept["measured_by"].endswith(f"--population {root}")
+    assert kept["population_digest"] == learned.population_digest("spread", str(root))
     assert (learned.data_dir("spread") / "manifest.json").read_bytes() == shipped
     # the window level: the MLP on the agent's last `window` observations (TransAM's context)
     assert levels.window == 5 and entry["levels_settings"]["window"] == 5

@@ -472,7 +472,7 @@ def diversity_record(
         "ceiling_sampled": levels["sampled"],
         "levels_settings": {**asdict(lv_cfg), "episodes_per_team": levels["episodes_per_team"]},
         "measured_by": command + (f" --population {root}" if root else ""),
-        "population_digest": learned.digest(env, split, root),
+        "population_digest": learned.directory_digest(root) if root else learned.digest(env, split),
     }
 
 
