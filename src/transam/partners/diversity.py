@@ -120,17 +120,20 @@ def fit_hits(
     """Whether a 2-layer MLP trained on the samples outside ``test`` predicts each ``test``
     sample right (bool, in order): :func:`fit_accuracy` per sample, for per-step levels."""
     test = np.asarray(test, bool)
-    mean, std = x[~test].mean(0), x[~test].std(0) + 1e-6
-    xs = (x - mean) / std
+    # Standardised part by part and handed to the program as arguments, not closed over as
+    # constants: Overcooked's window features (2,601 numbers a sample) are gigabytes.
+    seen = x[~test]
+    mean, std = seen.mean(0), seen.std(0) + 1e-6
+    xtr, ytr = jnp.asarray((seen - mean) / std), jnp.asarray(y[~test])
+    del seen
     net = Classifier(cfg.hidden, classes)
     tx = optax.adam(cfg.lr)
-    xtr, ytr = jnp.asarray(xs[~test]), jnp.asarray(y[~test])
 
     def loss(p: Any, xb: jax.Array, yb: jax.Array) -> jax.Array:
         return optax.softmax_cross_entropy_with_integer_labels(apply(net, p, xb), yb).mean()
 
     @jax.jit
-    def train(key: jax.Array) -> Any:
+    def train(key: jax.Array, xtr: jax.Array, ytr: jax.Array) -> Any:
         p = net.init(key, xtr[:1])
 
         def step(carry: tuple, k: jax.Array) -> tuple:
@@ -143,8 +146,9 @@ def fit_hits(
         keys = jax.random.split(key, cfg.train_steps)
         return jax.lax.scan(step, (p, tx.init(p)), keys)[0][0]
 
-    params = train(jax.random.PRNGKey(cfg.seed))
-    pred = np.asarray(jnp.argmax(apply(net, params, jnp.asarray(xs[test])), -1))
+    params = train(jax.random.PRNGKey(cfg.seed), xtr, ytr)
+    del xtr
+    pred = np.asarray(jnp.argmax(apply(net, params, jnp.asarray((x[test] - mean) / std)), -1))
     return pred == y[test]
 
 
