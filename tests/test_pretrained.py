@@ -50,7 +50,9 @@ def test_shipped_run_beats_random_play_and_the_memoryless_level(name: str, tmp_p
     if ACC_NEWEST in res:
         levels = partner_levels([config.env])[config.env]
         assert levels is not None
-        assert res[ACC_NEWEST] > levels["memoryless_own_accuracy"] + 0.05, res[ACC_NEWEST]
+        # past the two-step level: more than the partners' motion (the shipped TransAM: 0.63
+        # against 0.57 on 1,000 episodes)
+        assert res[ACC_NEWEST] > levels["memoryless_own2_accuracy"] + 0.03, res[ACC_NEWEST]
 
 
 def test_the_cli_lists_the_shipped_runs(capsys: pytest.CaptureFixture[str]) -> None:
@@ -60,4 +62,4 @@ def test_the_cli_lists_the_shipped_runs(capsys: pytest.CaptureFixture[str]) -> N
     text = capsys.readouterr().out
     for name in pretrained_names():
         assert name in text
-    assert "1000000" in text.replace(",", "")  # spread-transam's steps
+        assert str(read_card(pretrained_dir(name))["step"]) in text.replace(",", "")
