@@ -18,6 +18,8 @@
 #
 # Run from the repository root (resumes wherever it stopped):
 #   setsid nohup nice -n 10 docs/results/scripts/env_grid.sh tag > runs/grid-tag.log 2>&1 &
+#   echo 10 > /proc/$!/autogroup   # setsid starts a new scheduling group, across which nice does
+#                                   # nothing (Linux autogroup): lower the group's priority too
 # Before the session ends: stop it (kill -TERM its `transam reproduce` process; the run in
 # flight writes a checkpoint), then keep it:
 #   ARCHIVE_ONLY=1 docs/results/scripts/env_grid.sh tag && git add docs/results/tag/grid

@@ -12,6 +12,8 @@
 #
 # Run from the repository root (resumes wherever it stopped):
 #   setsid nohup nice -n 5 docs/results/scripts/paper_budget.sh > runs/paper-budget.log 2>&1 &
+#   echo 10 > /proc/$!/autogroup   # setsid starts a new scheduling group, across which nice does
+#                                   # nothing (Linux autogroup): lower the group's priority too
 # Before the session ends: stop it (kill -TERM the `transam reproduce` process group; the
 # run in flight writes a checkpoint), then keep it:
 #   ARCHIVE_ONLY=1 docs/results/scripts/paper_budget.sh && git add docs/results/paper-budget

@@ -9,6 +9,8 @@
 # record and metrics, and, while it is unfinished, its newest checkpoint (about 8 MB); a new
 # machine restores the run from there and resumes.
 #   setsid nohup nice -n 5 docs/results/scripts/ship_transam.sh > runs/ship_transam.log 2>&1 &
+#   echo 10 > /proc/$!/autogroup   # setsid starts a new scheduling group, across which nice does
+#                                   # nothing (Linux autogroup): lower the group's priority too
 #   STOP=1 docs/results/scripts/ship_transam.sh    # stop it (a checkpoint is kept) and archive
 # When it has finished: export it over src/transam/pretrained/spread-transam (`transam export
 # runs/spread-transam-5m --out ...`) and measure its gain with paired_gain.py.
