@@ -156,14 +156,17 @@ def _levels_md(table: Table, levels: dict[str, dict[str, Any] | None]) -> list[s
     )
     return [
         "Newest-position accuracy (%, mean over seeds) beside the partners' own levels, from "
-        "`transam partners diversity ENV --record` (default population): the *ceiling* is the "
+        "`transam partners diversity ENV --record` (the population the grid trained against): "
+        "the *ceiling* is the "
         "partners' mean most-likely-action probability under their own observations (no "
         "predictor can expect more); the *memoryless* level is an MLP's held-out accuracy at "
         "predicting a partner's action from that partner's current observation alone, pooled "
         "over all teams (no team, no history), and the same from the controlled agent's current "
         "observation (what an agent model has at one step without its history), and from its "
-        "current and previous observations (the partners' velocities readable); *majority* is "
-        "the most frequent action's rate. The levels are fits, so lower bounds. "
+        "current and previous observations (the partners' velocities readable), and from the "
+        "last five (what TransAM's window holds); *majority* is the most frequent action's "
+        "rate. The levels are fits, so lower bounds (a level below a shorter view's is a fit "
+        "short of its data, not less information). "
         "A model at the memoryless levels has learned nothing about whom it plays with: above "
         "the one-step level but not the two-step one, it may have learned only the state."
         + (f" Measured on population digests: {digests}." if digests else ""),
