@@ -18,13 +18,17 @@
 #
 # Run from the repository root (resumes wherever it stopped):
 #   setsid nohup nice -n 10 docs/results/scripts/env_grid.sh tag > runs/grid-tag.log 2>&1 &
-#   echo 10 > /proc/$!/autogroup   # setsid starts a new scheduling group, across which nice does
-#                                   # nothing (Linux autogroup): lower the group's priority too
 # Before the session ends: stop it (kill -TERM its `transam reproduce` process; the run in
 # flight writes a checkpoint), then keep it:
 #   ARCHIVE_ONLY=1 docs/results/scripts/env_grid.sh tag && git add docs/results/tag/grid
 set -euo pipefail
 cd "$(git -C "$(dirname "$0")" rev-parse --show-toplevel)"
+# setsid makes the script a session of its own, which Linux schedules as its own group
+# (autogroup), across which nice does nothing: lower the group's priority as well.
+read -r -a _stat < /proc/self/stat
+if [[ "${_stat[5]}" == "$$" && -w /proc/self/autogroup ]]; then
+  echo "${GROUP_NICE:-10}" > /proc/self/autogroup 2>/dev/null || true
+fi
 ENV_NAME=${1:?usage: env_grid.sh tag|overcooked|lbf}
 BIN=${BIN:-.venv/bin}
 OUT=${OUT:-runs/grid-$ENV_NAME}

@@ -12,8 +12,6 @@
 #
 # Run from the repository root (resumes wherever it stopped):
 #   setsid nohup nice -n 5 docs/results/scripts/paper_budget.sh > runs/paper-budget.log 2>&1 &
-#   echo 10 > /proc/$!/autogroup   # setsid starts a new scheduling group, across which nice does
-#                                   # nothing (Linux autogroup): lower the group's priority too
 # Before the session ends: stop it (kill -TERM the `transam reproduce` process group; the
 # run in flight writes a checkpoint), then keep it:
 #   ARCHIVE_ONLY=1 docs/results/scripts/paper_budget.sh && git add docs/results/paper-budget
@@ -21,6 +19,12 @@
 # docs/partners.md#bring-the-authors-spread-population); the population never enters git.
 set -euo pipefail
 cd "$(git -C "$(dirname "$0")" rev-parse --show-toplevel)"
+# setsid makes the script a session of its own, which Linux schedules as its own group
+# (autogroup), across which nice does nothing: lower the group's priority as well.
+read -r -a _stat < /proc/self/stat
+if [[ "${_stat[5]}" == "$$" && -w /proc/self/autogroup ]]; then
+  echo "${GROUP_NICE:-10}" > /proc/self/autogroup 2>/dev/null || true
+fi
 BIN=${BIN:-.venv/bin}
 OUT=${OUT:-runs/paper-budget}
 ARCHIVE=${ARCHIVE:-docs/results/paper-budget/grid}

@@ -9,13 +9,17 @@
 # record and metrics, and, while it is unfinished, its newest checkpoint (about 8 MB); a new
 # machine restores the run from there and resumes.
 #   setsid nohup nice -n 5 docs/results/scripts/ship_transam.sh > runs/ship_transam.log 2>&1 &
-#   echo 10 > /proc/$!/autogroup   # setsid starts a new scheduling group, across which nice does
-#                                   # nothing (Linux autogroup): lower the group's priority too
 #   STOP=1 docs/results/scripts/ship_transam.sh    # stop it (a checkpoint is kept) and archive
 # When it has finished: export it over src/transam/pretrained/spread-transam (`transam export
 # runs/spread-transam-5m --out ...`) and measure its gain with paired_gain.py.
 set -euo pipefail
 cd "$(git -C "$(dirname "$0")" rev-parse --show-toplevel)"
+# setsid makes the script a session of its own, which Linux schedules as its own group
+# (autogroup), across which nice does nothing: lower the group's priority as well.
+read -r -a _stat < /proc/self/stat
+if [[ "${_stat[5]}" == "$$" && -w /proc/self/autogroup ]]; then
+  echo "${GROUP_NICE:-10}" > /proc/self/autogroup 2>/dev/null || true
+fi
 BIN=${BIN:-.venv/bin}
 OUT=${OUT:-runs/spread-transam-5m}
 ARCHIVE=${ARCHIVE:-docs/results/shipped-transam/run}
