@@ -6,7 +6,10 @@ from pathlib import Path
 
 import pytest
 
+from transam import cli
 from transam.cli import main
+from transam.train import programs
+from transam.train.config import TrainConfig
 
 
 def test_envs_list_prints_every_environment(capsys: pytest.CaptureFixture[str]) -> None:
@@ -83,13 +86,22 @@ def test_partners_import_liam_names_what_is_missing(tmp_path: Path) -> None:
 
 
 def test_demo_trains_and_compares_with_a_random_agent(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     out = tmp_path / "demo"
+    # The shipped runs' table is tested in test_evaluation.py and test_pretrained.py; here it
+    # is left out, while the training programs compile ahead in a thread as they do beside it.
+    shown: list[tuple[str, int]] = []
+    monkeypatch.setattr(cli, "_print_showcase", lambda env, n: shown.append((env, n)))
+    compiled: list[TrainConfig] = []
+    ahead = programs.compile_ahead
+    monkeypatch.setattr(programs, "compile_ahead", lambda c: (ahead(c), compiled.append(c)))
     # NAM keeps the compile short; TransAM's training path is tested in test_methods.py.
     args = ["demo", "--method", "nam", "--total-steps", "100", "--out", str(out), "--no-progress"]
-    args.extend(["--pretrained-episodes", "0"])  # the shipped runs: tests/test_pretrained.py
+    args.extend(["--pretrained-episodes", "3"])
     main([*args, "--a2c.num-envs", "2", "--eval.every-episodes", "2", "--eval.episodes", "4"])
+    assert shown == [("spread", 3)]
+    assert [(c.method, c.total_steps, c.a2c.num_envs) for c in compiled] == [("nam", 100, 2)]
     text = capsys.readouterr().out
     assert "final evaluation: spread / nam" in text and "uniformly random agent" in text
     assert (out / "final.json").exists() and len(

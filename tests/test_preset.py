@@ -336,9 +336,10 @@ def test_further_model_passes_step_the_agent_model_only() -> None:
     # The collection the update learned from (its keys as make_update draws them).
     _, k_roll, _ = jax.random.split(jax.random.wrap_key_data(rs0.key), 3)
     keys = jax.random.split(k_roll, 5)
-    _, col = a2c.make_collect(cfg, env, model)(rs0, keys)  # type: ignore[arg-type]
+    _, col = jax.jit(a2c.make_collect(cfg, env, model))(rs0, keys)  # type: ignore[arg-type]
 
-    def loss(params: Any) -> float:
+    @jax.jit  # one program, not the loss op by op for each of three parameter sets
+    def mean_loss(params: Any) -> jax.Array:
         per = [
             model.loss(
                 params,
@@ -349,7 +350,10 @@ def test_further_model_passes_step_the_agent_model_only() -> None:
             )[0]
             for c in range(5)
         ]
-        return float(np.mean(per))
+        return jnp.mean(jnp.stack(per))
+
+    def loss(params: Any) -> float:
+        return float(mean_loss(params))
 
     assert loss(two.model_params) < loss(one.model_params) < loss(rs0.model_params)
     with pytest.raises(ConfigError, match=r"a2c\.model_passes must be >= 1, got 0"):

@@ -276,7 +276,7 @@ class Demo(TrainConfig):
         config = TrainConfig(**{f.name: getattr(self, f.name) for f in fields(TrainConfig)})
         config.validate()
         if self.pretrained_episodes:
-            _print_showcase(config.env, self.pretrained_episodes)
+            _showcase_while_compiling(config, self.pretrained_episodes)
         if not _run_train(config):
             return
         got = training_summary(config)
@@ -293,6 +293,27 @@ class Demo(TrainConfig):
                 f"{last['step']:,} steps; the memoryless level from the agent's own view "
                 f"{got.memoryless:.3f}"
             )
+
+
+def _showcase_while_compiling(config: TrainConfig, episodes: int) -> None:
+    """The shipped runs of ``config.env`` (:func:`_print_showcase`) while a thread compiles
+    the training programs: both cores busy, and the run starts with them compiled. A compile
+    error is left for the run itself to raise."""
+    import contextlib
+    import threading
+
+    from transam.train.programs import compile_ahead
+
+    def compile_quietly() -> None:
+        with contextlib.suppress(Exception):  # the run compiles again and reports it
+            compile_ahead(config)
+
+    thread = threading.Thread(target=compile_quietly, daemon=True)
+    if config.num_seeds == 1:
+        thread.start()
+    _print_showcase(config.env, episodes)
+    if thread.is_alive():
+        thread.join()
 
 
 def _print_showcase(env: str, episodes: int) -> None:

@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 
-from transam.compose import make_env
+from transam.compose import make_env, resolve_partners
 from transam.envs.core import ControlledEnv
 from transam.models import make_model
 from transam.models.base import AgentModel
@@ -84,9 +83,12 @@ def program_key(config: TrainConfig) -> TrainConfig:
 
 @dataclass(frozen=True)
 class Programs:
-    init: Callable[[jax.Array], RunnerState]  # one seed
-    chunks: dict[int, Callable[[RunnerState], tuple[RunnerState, dict[str, jax.Array]]]]
-    evaluate: Callable[[Any, Any, jax.Array], dict[str, jax.Array]]
+    """Each a ``jax.jit`` function: ``init`` (one seed), ``chunks[updates]`` (state -> (state,
+    metrics)) and ``evaluate`` (policy and model parameters, key -> metrics)."""
+
+    init: jax.stages.Wrapped
+    chunks: dict[int, jax.stages.Wrapped]
+    evaluate: jax.stages.Wrapped
 
 
 @functools.lru_cache(maxsize=8)
@@ -116,6 +118,21 @@ def run_programs(config: TrainConfig, vmapped: bool = False) -> Programs:
     env, _ = env_and_model(config)
     chunks = make_plan(config, env.spec.episode_len).chunks
     return programs(program_key(config), tuple(sorted(set(chunks))), vmapped)
+
+
+def compile_ahead(config: TrainConfig) -> None:
+    """Compile the programs of a one-seed run of ``config`` now, without running them, so
+    that the run finds them compiled. Compiling releases the GIL: the demo does this in a
+    thread while it evaluates the shipped runs, using both cores for what it would otherwise
+    compile one program after another."""
+    config = dataclasses.replace(config, partners=resolve_partners(config.partners))  # as train's
+    progs = run_programs(config)
+    key = jax.random.key(0)
+    state = jax.eval_shape(progs.init, key)
+    progs.init.lower(key).compile()
+    progs.evaluate.lower(state.policy_params, state.model_params, key).compile()
+    for chunk in progs.chunks.values():
+        chunk.lower(state).compile()
 
 
 def uniform_policy_params(policy_params: Any) -> Any:
