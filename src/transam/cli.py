@@ -333,8 +333,9 @@ def _print_showcase(env: str, episodes: int) -> None:
         "partners and starts), ± its standard error; accuracy: of the partners' actions, "
         "predicted at the newest position from the agent's own trajectory; memoryless: an MLP "
         "trained to predict them from the agent's current observation alone, or from its "
-        "current and previous ones (2 steps: the partners' velocities readable), pooled over "
-        "teams (the population's recorded levels); a model above them has learned whom it "
+        "current and previous ones (2 steps: the partners' velocities readable), or its last "
+        "five (window: what TransAM's window holds), pooled over teams (the population's "
+        "recorded levels); a model above them has learned whom it "
         "plays with",
     )
     for col in ("agent", "steps", "return", "± s.e.", "vs random", "accuracy"):
