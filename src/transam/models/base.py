@@ -221,19 +221,6 @@ class PrivilegedModel(AgentModel, Protocol):
     ) -> jax.Array: ...
 
 
-class _HasLoss(Protocol):
-    def loss(
-        self,
-        params: Params,
-        carry: Carry,
-        xs: LocalStep,
-        targets: PartnerRecord,
-        key: jax.Array | None = None,
-        prior: PartnerRecord | None = None,
-        prior_ok: jax.Array | None = None,
-    ) -> tuple[jax.Array, dict[str, jax.Array]]: ...
-
-
 class ModelDefaults:
     """The neutral values of the protocol's members that only some methods use, for a model to
     inherit (NAM, the Oracle, the recurrent baselines, PEL, a model of your own): its loss
@@ -245,7 +232,7 @@ class ModelDefaults:
         return 0
 
     def loss_and_embed(
-        self: _HasLoss,
+        self: AgentModel,
         params: Params,
         carry: Carry,
         xs: LocalStep,
