@@ -14,12 +14,7 @@
 # runs/spread-transam-5m --out ...`) and measure its gain with paired_gain.py.
 set -euo pipefail
 cd "$(git -C "$(dirname "$0")" rev-parse --show-toplevel)"
-# setsid makes the script a session of its own, which Linux schedules as its own group
-# (autogroup), across which nice does nothing: lower the group's priority as well.
-read -r -a _stat < /proc/self/stat
-if [[ "${_stat[5]}" == "$$" && -w /proc/self/autogroup ]]; then
-  echo "${GROUP_NICE:-10}" > /proc/self/autogroup 2>/dev/null || true
-fi
+source docs/results/scripts/background.sh  # setsid: lower its scheduling group too
 BIN=${BIN:-.venv/bin}
 OUT=${OUT:-runs/spread-transam-5m}
 ARCHIVE=${ARCHIVE:-docs/results/shipped-transam/run}
