@@ -253,9 +253,11 @@ def grid_partners(out: str | Path) -> str:
     return json.loads(path.read_text()).get("partners", "default") if path.exists() else "default"
 
 
-OVERRIDABLE = ("total_steps", "evals", "eval_episodes", "final_episodes")
+TRAINING_SETTINGS = ("total_steps", "evals", "eval_episodes")
+"""The budget settings a new grid may change and an existing one keeps (its runs share them)."""
+OVERRIDABLE = (*TRAINING_SETTINGS, "final_episodes")
 """The budget settings a grid may change (``transam reproduce --total-steps`` etc.; recorded
-in grid.json, see :func:`grid_budget`): all but the last only when the grid is new."""
+in grid.json, see :func:`grid_budget`)."""
 
 
 def open_grid(
@@ -295,7 +297,7 @@ def open_grid(
                 f"--out {str(out)!r} holds a grid against partners "
                 f"{grid.get('partners', 'default')!r}; use another --out for partners {partners!r}"
             )
-        for key in OVERRIDABLE[:-1]:
+        for key in TRAINING_SETTINGS:
             had = grid["budget_settings"][key]
             if given.get(key, had) != had:
                 raise ConfigError(
