@@ -11,6 +11,8 @@
 #   Overcooked   1.5M steps (learns within 1-1.5M; the evaluations of 400-step episodes
 #                           cost as much as training: 25 of 100 episodes, 200 final ones)
 #   LBF          4M steps  (not before its plateau is explained: docs/results/lbf/README.md)
+#   spread       the medium grid (docs/results/medium/README.md): all ten methods, the
+#                `medium` budget as it is (1M steps), archived in docs/results/medium/grid
 #
 # It spans sessions whose machines do not keep runs/: the grid is kept in
 # docs/results/ENV/grid, finished runs without checkpoints and an unfinished one with its
@@ -24,9 +26,13 @@
 set -euo pipefail
 cd "$(git -C "$(dirname "$0")" rev-parse --show-toplevel)"
 source docs/results/scripts/background.sh  # setsid: lower its scheduling group too
-ENV_NAME=${1:?usage: env_grid.sh tag|overcooked|lbf}
+ENV_NAME=${1:?usage: env_grid.sh tag|overcooked|lbf|spread}
 BIN=${BIN:-.venv/bin}
 OUT=${OUT:-runs/grid-$ENV_NAME}
+if [[ "$ENV_NAME" == spread ]]; then  # the medium grid
+  ARCHIVE=${ARCHIVE:-docs/results/medium/grid}
+  METHODS=${METHODS:-nam oracle liam cail pel carl transam transam-fuse transam-pool transam-im}
+fi
 ARCHIVE=${ARCHIVE:-docs/results/$ENV_NAME/grid}
 METHODS=${METHODS:-nam oracle liam transam}
 SEEDS=${SEEDS:-0 1 2}
@@ -34,7 +40,9 @@ case "$ENV_NAME" in
   tag) BUDGET=(--total-steps 3000000 --evals 40 --eval-episodes 100 --final-episodes 500) ;;
   overcooked) BUDGET=(--total-steps 1500000 --evals 25 --eval-episodes 100 --final-episodes 200) ;;
   lbf) BUDGET=(--total-steps 4000000 --evals 40 --eval-episodes 100 --final-episodes 500) ;;
-  *) echo "unknown environment '$ENV_NAME'; valid choices: tag, overcooked, lbf" >&2; exit 2 ;;
+  spread) BUDGET=() ;;
+  *) echo "unknown environment '$ENV_NAME'; valid choices: tag, overcooked, lbf, spread" >&2
+     exit 2 ;;
 esac
 
 if [[ -z "${ARCHIVE_ONLY:-}" ]]; then
