@@ -253,10 +253,11 @@ class Train(TrainConfig):
 
 @dataclass(frozen=True)
 class Demo(TrainConfig):
-    """The main job on built-in defaults: a short TransAM training run on Spread (the default
-    settings, the authors' training loop; a few minutes on 2 CPU cores). Prints the evaluation
-    during and after training next to a uniformly random agent on the same evaluation episodes,
-    and where the outputs are. Every `transam train` option applies."""
+    """The main job on built-in defaults: the shipped pretrained runs of --env, each beside a
+    uniformly random agent on the same episodes, then a short training run (TransAM on Spread
+    by default; the default settings, the authors' training loop). Prints the evaluation during
+    and after training next to a uniformly random agent on the same evaluation episodes, and
+    where the outputs are. Every `transam train` option applies."""
 
     total_steps: int = 50_000
     """controlled-agent environment steps, summed over parallel envs"""
@@ -401,7 +402,8 @@ class Reproduce:
     then build the report (figures, report.md, results.json) in --out/report/."""
 
     budget: Literal["smoke", "small", "medium", "paper"] = "small"
-    """smoke: minutes (a test); small: a few hours on 2 CPU cores; paper: 10M steps x 5 seeds"""
+    """steps x seeds per run: smoke 1k x 2 (every artefact, nothing learned; a test runs it),
+    small 30k x 2, medium 1M x 3, paper 10M x 5 (docs/reproducing.md)"""
     out: str = "runs/reproduce"
     """grid directory (one budget per directory)"""
     envs: tuple[EnvName, ...] = PAPER_ENVS
@@ -824,7 +826,7 @@ class PartnersDiversity:
     levels_episodes: int | None = None
     """episodes per team for the accuracy levels (default: LevelsConfig's 25,600 steps' worth,
     1,024 on Spread). The levels are fits of an MLP, so lower bounds: less data (and fewer
-    --levels-steps) lower them, a lot on Spread (docs/results/parity/README.md)"""
+    --levels-steps) lower them"""
     levels_steps: int | None = None
     """training steps of the levels' MLPs, batch 256 (default: LevelsConfig's 20,000)"""
 

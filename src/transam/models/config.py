@@ -21,8 +21,7 @@ class BaselineConfig:
     temperature: float = 0.1
     """InfoNCE temperature (CARL, PEL)"""
     carl_positives: Literal["episode", "partner"] = "partner"
-    """CARL positives: steps with the same partner index (supervised contrastive, default: the
-    issue's definition) or only steps of the same episode (SimCLR-style; near-trivial on short
-    rollouts: top-1 ~1.0 within a few thousand steps)"""
+    """CARL positives: steps with the same partner index (supervised contrastive, default) or
+    only steps of the same episode (SimCLR-style: on short rollouts the task is near-trivial)"""
     pel_alpha: float = 1.0
     """PEL: weight of the discriminative (contrastive) loss against the generative one"""
