@@ -25,13 +25,13 @@ def test_unknown_env_names_the_choices() -> None:
 
 def test_spec_matches_arrays(env: ControlledEnv) -> None:
     s = env.spec
-    state, obs = env.reset(jax.random.key(0))
+    state, obs = jax.jit(env.reset)(jax.random.key(0))  # jitted: one program, not one per op
     assert obs.shape == (s.obs_dim,) and obs.dtype == jnp.float32
     assert state.other_obs.shape == (s.num_others, s.other_obs_dim)
     assert state.other_obs.dtype == jnp.float32
     assert len(s.action_names) == s.num_actions and s.episode_len > 0
     assert env.population.num_others == s.num_others and env.num_partners >= 2
-    _, ts = env.step(jax.random.key(1), state, jnp.int32(0))
+    _, ts = jax.jit(env.step)(jax.random.key(1), state, jnp.int32(0))
     assert ts.record.other_actions.shape == (s.num_others,)
     assert ts.record.other_actions.dtype == jnp.int32
     assert ts.reward.shape == () and ts.reward.dtype == jnp.float32
@@ -156,8 +156,8 @@ def test_heuristic_partners_fit_any_config() -> None:
     cfg = envs.config_class("lbf")(grid_size=7, num_foods=3, sight=2, penalty=0.25)
     env = make_env("lbf", cfg, partners="heuristic")
     assert env.population.name == "lbf-heuristic"
-    state, obs = env.reset(jax.random.key(0))
-    _, ts = env.step(jax.random.key(1), state, jnp.int32(0))
+    state, obs = jax.jit(env.reset)(jax.random.key(0))
+    _, ts = jax.jit(env.step)(jax.random.key(1), state, jnp.int32(0))
     assert obs.shape == (cfg.obs_dim,) and ts.record.other_obs.shape == (1, cfg.obs_dim)
     cfg = envs.config_class("overcooked")(controlled_slot=1, random_reset=True)
     assert make_env("overcooked", cfg, partners="heuristic").num_partners == 5

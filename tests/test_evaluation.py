@@ -420,8 +420,9 @@ def test_the_demo_shows_each_shipped_run_beside_random_play_and_the_levels(
     assert "spread-liam: how it trained" in text  # budgets and settings differ between runs
     res = json.loads((tmp_path / "runs/pretrained/spread-liam/eval_train.json").read_text())
     assert f"{res['return']['mean']:.4g}" in text
-    trained, random = showcase.paired_random_returns("spread-liam", EPISODES)
-    assert trained.mean() == pytest.approx(res["return"]["mean"])  # the same episodes
+    trained, random = final.paired_random_returns("spread-liam", EPISODES)
+    np.testing.assert_allclose(res["returns"], trained, rtol=1e-6)  # the same episodes
+    assert trained.mean() == pytest.approx(res["return"]["mean"])
     assert f"{random.mean():.4g}" in text and random.mean() != trained.mean()
     assert f"{(trained - random).mean():+.2f}" in text
     assert weights.resolve_run("spread-liam") == shipped / "spread-liam"

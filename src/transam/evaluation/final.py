@@ -129,7 +129,18 @@ def paired_random_returns(
     """Per-episode returns of the run's policy and of a uniformly random controlled agent (the
     policy with its actor zeroed: every action equally likely) on the episodes ``evaluate_run``
     plays with the same ``episodes`` and ``seed``: the same partners and starts, so the
-    difference of the two has a far smaller standard error than either return."""
+    difference of the two has a far smaller standard error than either return. After
+    ``evaluate_run``, its JSON's ``returns`` and :func:`random_returns` give the same pair
+    without playing the policy again."""
+    return _play(run_dir, episodes, seed, random=False), random_returns(run_dir, episodes, seed)
+
+
+def random_returns(run_dir: str | Path, episodes: int = 100, seed: int = 0) -> np.ndarray:
+    """The random half of :func:`paired_random_returns`."""
+    return _play(run_dir, episodes, seed, random=True)
+
+
+def _play(run_dir: str | Path, episodes: int, seed: int, random: bool) -> np.ndarray:
     from transam.train.programs import env_and_model, program_key, uniform_policy_params
 
     run_dir = resolve_run(run_dir)
@@ -138,11 +149,9 @@ def paired_random_returns(
     run = _program(program_key(config), episodes)
     num_partners = env_and_model(config)[0].num_partners
     partner_ids = jnp.asarray(balanced_partners(episodes, num_partners))
-    out = []
-    for params in (w.policy_params, uniform_policy_params(w.policy_params)):
-        ep = run(params, w.model_params, jax.random.key(seed), partner_ids)
-        out.append(np.asarray(jax.device_get(ep.reward), np.float64).sum(0))
-    return out[0], out[1]
+    params = uniform_policy_params(w.policy_params) if random else w.policy_params
+    ep = run(params, w.model_params, jax.random.key(seed), partner_ids)
+    return np.asarray(jax.device_get(ep.reward), np.float64).sum(0)
 
 
 def evaluate_starts(
@@ -357,6 +366,7 @@ def _evaluate_locked(
         "greedy": config.eval.greedy,
         "act_dropout": eval_config.acting_dropout,
         "return": {"mean": float(returns.mean()), "std": float(returns.std())},
+        "returns": [float(r) for r in returns],  # per episode, to pair with other players
     }
     per_step: dict[str, Any] = {"cum_return": [float(v) for v in reward.cumsum(0).mean(1)]}
     for key in (*EVAL_METRICS, POLICY_ENTROPY):

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from transam.evaluation.final import evaluate_run, paired_random_returns
+from transam.evaluation.final import evaluate_run, random_returns
 from transam.evaluation.weights import pretrained_dir, pretrained_names, read_card
 from transam.models.base import ACC_NEWEST
 from transam.train.config import TrainConfig
@@ -66,7 +66,7 @@ def showcase(env: str, episodes: int = 200, seed: int = 0) -> Showcase | None:
     if not names:
         return None
     runs = {n: evaluate_run(n, episodes, seed=seed) for n in names}
-    paired = {n: paired_random_returns(n, episodes, seed) for n in names}
+    paired = {n: (np.asarray(runs[n]["returns"]), random_returns(n, episodes, seed)) for n in names}
     gain = {n: mean_se(t - r) for n, (t, r) in paired.items()}
     return Showcase(
         env=env,
