@@ -45,10 +45,10 @@ from transam.envs import lbf
 from transam.envs.core import ControlledEnv
 from transam.evaluation.final import balanced_partners, population_for
 from transam.evaluation.weights import resolve_run, restore_weights
+from transam.models import make_model
 from transam.partners import lbf as lbf_partners
 from transam.rundir import load_run_config
 from transam.train.a2c import act, batch_carry, env_step, first_step, make_policy
-from transam.models import make_model
 
 # An agent: (init(n) -> carry, step(carry, x, env_state, key) -> (carry, actions [n])).
 Agent = tuple[Callable[[int], Any], Callable[[Any, Any, Any, jax.Array], tuple[Any, jax.Array]]]
@@ -185,6 +185,15 @@ def analyse(rec: dict[str, np.ndarray], config: lbf.Config) -> dict[str, Any]:
     mine_r = rewards[..., 0] * live
     my_joint_r = np.where(joint.any(-1), mine_r, 0.0)
 
+    # Navigation: the nearest food the agent can load alone, before and after the step.
+    alone_food = alive & (flvl <= lvl[..., :1])  # [T, n, F]
+    new_pos = np.asarray(nxt.agent_pos).reshape(T, n, 2, 2)[:, :, 0]
+    d_now = np.where(alone_food, dist[:, :, 0], 999).min(-1)
+    d_next = np.where(alone_food, np.abs(new_pos[:, :, None] - fpos).sum(-1), 999).min(-1)
+    en_route = live & alone_food.any(-1) & (d_now > 1)
+    at_alone = live & (d_now == 1)
+    stayed = live & (new_pos == pos[:, :, 0]).all(-1) & ~my_collect
+
     ep = {  # per-episode values
         "return": mine_r.sum(0),
         "partner return": (rewards[..., 1] * live).sum(0),
@@ -214,6 +223,12 @@ def analyse(rec: dict[str, np.ndarray], config: lbf.Config) -> dict[str, Any]:
         "needs partner adjacent": (v0 & ~alone_ok & partner_adj).sum(),
         "needs partner loading": (v0 & ~alone_ok & partner_loads_same).sum(),
         "failed": failed.sum(),
+        "en route": en_route.sum(),
+        "closer": (en_route & (d_next < d_now)).sum(),
+        "farther": (en_route & (d_next > d_now)).sum(),
+        "at alone": at_alone.sum(),
+        "at alone loads": (at_alone & vload[..., 0] & alone_ok).sum(),
+        "stayed": stayed.sum(),
         "failed needs": (failed & ~alone_ok).sum(),
     }
     shares = [  # (label, numerator, denominator)
@@ -226,6 +241,12 @@ def analyse(rec: dict[str, np.ndarray], config: lbf.Config) -> dict[str, Any]:
         ("  of these, partner adjacent to it", "needs partner adjacent", "needs"),
         ("  of these, partner loading it too", "needs partner loading", "needs"),
         ("failed valid loads at a food needing partner", "failed needs", "failed"),
+        ("steps en route (alone-loadable food, not adj.)", "en route", "steps"),
+        ("  of these, closer to the nearest one", "closer", "en route"),
+        ("  of these, farther from it", "farther", "en route"),
+        ("steps adjacent to an alone-loadable food", "at alone", "steps"),
+        ("  of these, loading it", "at alone loads", "at alone"),
+        ("steps staying in place without collecting", "stayed", "steps"),
     ]
     return {"episodes": ep, "counts": c, "shares": shares, "level": lvl[0, :, 0]}
 
