@@ -7,7 +7,10 @@ differs), records every step's game state and both agents' actions, and prints o
 agent:
 
     python docs/results/scripts/lbf_behaviour.py runs/lbf-6m/seed_0 runs/lbf-6m/seed_1 \
-        --episodes 200 [--greedy] [--partners default|heldout]
+        --episodes 500 [--greedy] [--partners train|heldout]
+
+Runs of lbf_relative.py (``lbf-rel``: the controlled agent's observation relative to itself)
+are played in that variant, on the same episodes (the same game states and partners).
 
 What the rows mean (each episode is one parallel copy's first episode, at most 50 steps; a
 "load" is the agent choosing action 5; it is *valid* when a food is 4-adjacent, else the game
@@ -292,19 +295,26 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--greedy", action="store_true", help="argmax actions (default: sample)")
     args = parser.parse_args(argv)
 
+    import lbf_relative  # beside this script: registers lbf-rel, which its runs need
+
+    lbf_relative.register()
     trained = load_run_config(resolve_run(args.runs[0])).partners if args.runs else "default"
-    env = make_env("lbf", partners=population_for(trained, args.partners))
+    choice = population_for(trained, args.partners)
+    env = make_env("lbf", partners=choice)
     config = env.game.config
-    agents: dict[str, Agent] = {
-        "H3": rule_agent(lbf_partners.heuristic(False, "own", config)),
-        "H1": rule_agent(lbf_partners.heuristic(False, None, config)),
+    agents: dict[str, tuple[Agent, ControlledEnv]] = {
+        "H3": (rule_agent(lbf_partners.heuristic(False, "own", config)), env),
+        "H1": (rule_agent(lbf_partners.heuristic(False, None, config)), env),
     }
     for run in args.runs:
-        agent, label = run_agent(run, args.greedy, env)
-        agents[label] = agent
+        run_env = env
+        if load_run_config(resolve_run(run)).env == lbf_relative.NAME:
+            run_env = make_env(lbf_relative.NAME, partners=choice)
+        agent, label = run_agent(run, args.greedy, run_env)
+        agents[label] = (agent, run_env)
     results = {}
-    for name, agent in agents.items():
-        results[name] = analyse(play(env, agent, args.episodes, args.seed), config)
+    for name, (agent, agent_env) in agents.items():
+        results[name] = analyse(play(agent_env, agent, args.episodes, args.seed), config)
     mode = "greedy" if args.greedy else "sampled"
     print(
         f"LBF behaviour: {args.episodes} episodes, seed {args.seed}, partners {args.partners} "
