@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from transam.compose import make_env as make_default_env
 from transam.envs.core import EnvError, EnvState
 from transam.envs.lbf import (
     EAST,
@@ -125,6 +126,22 @@ def test_observation_layout() -> None:
     obs = np.asarray(jit_observe(edge, 0, near))  # column offset 3 > sight, still seen
     np.testing.assert_array_equal(obs[:6], [2, 1, 1, -1, -1, 0])
     np.testing.assert_array_equal(obs[12:], [1, 1, 1, 3, 4, 2])
+
+
+def test_relative_obs_changes_only_the_controlled_view() -> None:
+    """``relative_obs``: foods and the partner as offsets from the controlled agent, unused
+    slots zero, own position and all levels kept; the partner's view stays lbforaging's."""
+    s = state([[10, 10], [3, 4]], [1, 2], [[12, 3], [2, 15], [7, 7], [9, 11]], [1, 2, 0, 3])
+    rel = Config(relative_obs=True)
+    obs, other = jax.jit(LBFGame(rel).observe)(s)
+    expected = [-8, 5, 2, -1, 1, 3, 2, -7, 1, 0, 0, 0, 10, 10, 1, -7, -6, 2]
+    np.testing.assert_array_equal(np.asarray(obs), expected)
+    np.testing.assert_array_equal(np.asarray(other[0]), np.asarray(jit_observe(s, 1, CFG)))
+    plain, _ = jax.jit(LBFGame(CFG).observe)(s)
+    np.testing.assert_array_equal(np.asarray(plain), np.asarray(jit_observe(s, 0, CFG)))
+    # The learned partners act on their own (unchanged) view, so they are offered here too.
+    env = make_default_env("lbf", rel)
+    assert env.spec.obs_dim == 18 and env.num_partners > 1
 
 
 def test_spawn_rules() -> None:

@@ -270,7 +270,7 @@ _paper_env(
     "lbf_features",
     title="LBF (level-based foraging)",
     episode_len=50,
-    blind_fields=frozenset({"penalty", "episode_len"}),
+    blind_fields=frozenset({"penalty", "episode_len", "relative_obs"}),
     partner_actions=6,
     marl_eval=("lbf", "20x20-2p-4f"),
 )

@@ -45,6 +45,12 @@ lbforaging rule set is about as much code as those adapters.
   grid_size - 1) these are absolute grid coordinates. With a smaller sight a food is visible
   inside the (2*sight+1)^2 window and the other agent when its window coordinates lie in
   [0, 2*sight] (lbforaging's quirk, kept).
+* ``relative_obs`` (off by default, not in lbforaging): the *controlled* agent's observation
+  gives each visible food's and the other agent's (row, col) as offsets from its own position
+  (entity minus self), unused and unseen slots (0, 0, 0); its own (row, col) stays as above,
+  and the slots keep their order. The partners' observations (``other_obs``, what the learned
+  partners act on and agent models reconstruct) stay lbforaging's. An issue-36 diagnostic:
+  "the nearest food I can load" is then a lookup rather than a subtraction the policy learns.
 * Partners: the shipped learned population by default (:func:`transam.make_env`); the
   heuristic one of :mod:`transam.partners.lbf` with ``partners="heuristic"``.
 """
@@ -83,6 +89,7 @@ class Config:
     force_coop: bool = False  # every food at the maximum level (needs both agents)
     penalty: float = 0.0  # reward subtracted from each agent of a failed load
     episode_len: int = 50  # time limit in steps (a truncation, counted by ControlledEnv)
+    relative_obs: bool = False  # the controlled agent sees foods and partner relative to itself
 
     def __post_init__(self) -> None:
         if self.grid_size < 3:
@@ -268,6 +275,16 @@ def observe_agent(state: State, i: int, config: Config) -> jax.Array:
     return jnp.concatenate([foods.ravel(), *players]).astype(jnp.float32)
 
 
+def relative_view(obs: jax.Array, num_foods: int) -> jax.Array:
+    """An observation (layout above) with foods and the other agent as offsets from self;
+    slots of level 0 (unused, unseen) become (0, 0, 0). See ``Config.relative_obs``."""
+    foods, players = split_obs(obs, num_foods)
+    me = players[0, :2]
+    rows = jnp.concatenate([foods, players[1:]])
+    rel = jnp.where(rows[:, 2:] > 0, jnp.concatenate([rows[:, :2] - me, rows[:, 2:]], -1), 0.0)
+    return jnp.concatenate([rel[:num_foods].ravel(), players[0], rel[num_foods:].ravel()])
+
+
 def split_obs(obs: jax.Array, num_foods: int) -> tuple[jax.Array, jax.Array]:
     """(foods [num_foods, 3], players [NUM_AGENTS, 3], self first) rows of (row, col, level)."""
     return obs[: 3 * num_foods].reshape(num_foods, 3), obs[3 * num_foods :].reshape(-1, 3)
@@ -298,7 +315,10 @@ class LBFGame:
 
     def observe(self, state: State) -> tuple[jax.Array, jax.Array]:
         obs = [observe_agent(state, i, self.config) for i in range(NUM_AGENTS)]
-        return obs[CONTROLLED], jnp.stack([o for i, o in enumerate(obs) if i != CONTROLLED])
+        mine = obs[CONTROLLED]
+        if self.config.relative_obs:
+            mine = relative_view(mine, self.config.num_foods)
+        return mine, jnp.stack([o for i, o in enumerate(obs) if i != CONTROLLED])
 
     def transition(
         self, key: jax.Array, state: State, action: jax.Array, other_actions: jax.Array
