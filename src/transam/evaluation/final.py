@@ -132,15 +132,20 @@ def paired_random_returns(
     difference of the two has a far smaller standard error than either return. After
     ``evaluate_run``, its JSON's ``returns`` and :func:`random_returns` give the same pair
     without playing the policy again."""
-    return _play(run_dir, episodes, seed, random=False), random_returns(run_dir, episodes, seed)
+    trained, random = _play(run_dir, episodes, seed, (False, True))
+    return trained, random
 
 
 def random_returns(run_dir: str | Path, episodes: int = 100, seed: int = 0) -> np.ndarray:
     """The random half of :func:`paired_random_returns`."""
-    return _play(run_dir, episodes, seed, random=True)
+    return _play(run_dir, episodes, seed, (True,))[0]
 
 
-def _play(run_dir: str | Path, episodes: int, seed: int, random: bool) -> np.ndarray:
+def _play(
+    run_dir: str | Path, episodes: int, seed: int, random: tuple[bool, ...]
+) -> list[np.ndarray]:
+    """Per-episode returns of the run's policy (False) or the uniform one (True), for each
+    entry of ``random``, on the same episodes; the run is restored once."""
     from transam.train.programs import env_and_model, program_key, uniform_policy_params
 
     run_dir = resolve_run(run_dir)
@@ -149,9 +154,12 @@ def _play(run_dir: str | Path, episodes: int, seed: int, random: bool) -> np.nda
     run = _program(program_key(config), episodes)
     num_partners = env_and_model(config)[0].num_partners
     partner_ids = jnp.asarray(balanced_partners(episodes, num_partners))
-    params = uniform_policy_params(w.policy_params) if random else w.policy_params
-    ep = run(params, w.model_params, jax.random.key(seed), partner_ids)
-    return np.asarray(jax.device_get(ep.reward), np.float64).sum(0)
+    out = []
+    for uniform in random:
+        params = uniform_policy_params(w.policy_params) if uniform else w.policy_params
+        ep = run(params, w.model_params, jax.random.key(seed), partner_ids)
+        out.append(np.asarray(jax.device_get(ep.reward), np.float64).sum(0))
+    return out
 
 
 def evaluate_starts(
