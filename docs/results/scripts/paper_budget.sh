@@ -35,6 +35,6 @@ if [[ -z "${ARCHIVE_ONLY:-}" ]]; then
   fi
   # shellcheck disable=SC2086  # METHODS and SEEDS are lists
   "$BIN/transam" reproduce --budget paper --envs spread --methods $METHODS --seeds $SEEDS \
-    --partners "$POP" --out "$OUT" --jobs 1 --final-episodes 500
+    --partners "$POP" --out "$OUT" --jobs "${JOBS:-1}" --final-episodes 500
 fi
 "$BIN/python" docs/results/scripts/archive_grid.py --carry "$OUT" "$ARCHIVE"

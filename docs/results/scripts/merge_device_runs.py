@@ -1,0 +1,71 @@
+"""Merge runs trained on a lent GPU machine (device_paper_budget.sh's pbK.tgz) into a grid.
+
+Each tarball holds a one-run grid (grid.json, log/, runs/ENV/METHOD/seed_S with its
+checkpoints). A run replaces the grid's copy only where it is further along (more chunks in
+metrics.jsonl); the device's invocations (their machine record says "gpu") are appended to
+grid.json and its log lines to log/, so the grid says where every chunk was trained. The grid
+then resumes the runs with the same `transam reproduce` command (paper_budget.sh).
+
+    python docs/results/scripts/merge_device_runs.py runs/device/pb*.tgz --grid runs/paper-budget
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import tarfile
+import tempfile
+from pathlib import Path
+
+from transam.rundir import write_json
+
+
+def _chunks(run: Path) -> int:
+    path = run / "metrics.jsonl"
+    return len(path.read_text().splitlines()) if path.exists() else 0
+
+
+def merge(tarball: Path, grid_dir: Path) -> list[str]:
+    """Merge one tarball into ``grid_dir``; the runs it replaced."""
+    grid = json.loads((grid_dir / "grid.json").read_text())
+    replaced = []
+    with tempfile.TemporaryDirectory() as tmp, tarfile.open(tarball) as tar:
+        tar.extractall(tmp, filter="data")
+        src = Path(tmp)
+        device = json.loads((src / "grid.json").read_text())
+        if device["budget_settings"]["total_steps"] != grid["budget_settings"]["total_steps"]:
+            raise SystemExit(f"{tarball}: another budget than {grid_dir}'s")
+        for rel in device["runs"]:
+            run, mine = src / rel, grid_dir / rel
+            if not (run / "config.json").exists() or _chunks(run) <= _chunks(mine):
+                continue
+            shutil.rmtree(mine, ignore_errors=True)
+            shutil.copytree(run, mine, ignore=shutil.ignore_patterns(".lock"))
+            replaced.append(f"{rel}: {_chunks(run)} chunks")
+            if rel not in grid["runs"]:
+                grid["runs"].append(rel)
+        known = {inv["started"] for inv in grid["invocations"]}
+        grid["invocations"] += [i for i in device["invocations"] if i["started"] not in known]
+        for log in sorted((src / "log").glob("*.jsonl")):
+            dest = grid_dir / "log" / log.name
+            have = set(dest.read_text().splitlines()) if dest.exists() else set()
+            new = [line for line in log.read_text().splitlines() if line not in have]
+            with dest.open("a") as f:
+                f.writelines(line + "\n" for line in new)
+    write_json(grid_dir / "grid.json", grid)
+    return replaced
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("tarballs", nargs="+", type=Path)
+    parser.add_argument("--grid", type=Path, default=Path("runs/paper-budget"))
+    args = parser.parse_args()
+    for tarball in args.tarballs:
+        for line in merge(tarball, args.grid):
+            print(f"{tarball}: {line}")
+
+
+if __name__ == "__main__":
+    main()
