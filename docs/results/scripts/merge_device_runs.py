@@ -1,12 +1,13 @@
-"""Merge runs trained on a lent GPU machine (device_paper_budget.sh's pbK.tgz) into a grid.
+"""Merge runs trained on a lent GPU machine (device_grid.sh's runK.tgz) into a grid.
 
-Each tarball holds a one-run grid (grid.json, log/, runs/ENV/METHOD/seed_S with its
-checkpoints). A run replaces the grid's copy only where it is further along (more chunks in
-metrics.jsonl); the device's invocations (their machine record says "gpu") are appended to
-grid.json and its log lines to log/, so the grid says where every chunk was trained. The grid
-then resumes the runs with the same `transam reproduce` command (paper_budget.sh).
+Each tarball holds a grid as the device left it (grid.json, log/, the one run it trained,
+runs/ENV/METHOD/seed_S, with its newest checkpoint). A run replaces the grid's copy only
+where it is further along (more chunks in metrics.jsonl); the device's invocations (their
+machine record says "gpu") are appended to grid.json and its log lines to log/, so the grid
+says where every chunk was trained. The grid then resumes the runs with the same `transam
+reproduce` command (paper_budget.sh, env_grid.sh); a grid not here yet starts as the device's.
 
-    python docs/results/scripts/merge_device_runs.py runs/device/pb*.tgz --grid runs/paper-budget
+    python docs/results/scripts/merge_device_runs.py DEVICE_FILES/run*.tgz --grid runs/paper-budget
 """
 
 from __future__ import annotations
@@ -28,12 +29,15 @@ def _chunks(run: Path) -> int:
 
 def merge(tarball: Path, grid_dir: Path) -> list[str]:
     """Merge one tarball into ``grid_dir``; the runs it replaced."""
-    grid = json.loads((grid_dir / "grid.json").read_text())
     replaced = []
     with tempfile.TemporaryDirectory() as tmp, tarfile.open(tarball) as tar:
         tar.extractall(tmp, filter="data")
         src = Path(tmp)
         device = json.loads((src / "grid.json").read_text())
+        if not (grid_dir / "grid.json").exists():
+            (grid_dir / "log").mkdir(parents=True, exist_ok=True)
+            write_json(grid_dir / "grid.json", {**device, "runs": [], "invocations": []})
+        grid = json.loads((grid_dir / "grid.json").read_text())
         if device["budget_settings"]["total_steps"] != grid["budget_settings"]["total_steps"]:
             raise SystemExit(f"{tarball}: another budget than {grid_dir}'s")
         for rel in device["runs"]:

@@ -1,0 +1,79 @@
+#!/usr/bin/env bash
+# A grid's runs on a lent GPU machine, for the minutes a session has one (issues 35, 36): each
+# run of RUNS ("METHOD:SEED ...", at most 6) in its own `transam reproduce` process, side by
+# side on the one GPU (the program is latency-bound: docs/performance.md#on-a-gpu), each
+# started from the grid's archive (ARCHIVE: a carried run resumes from its checkpoint; none
+# there, a new grid) and stopped with SIGTERM after TRAIN_S seconds (it checkpoints at its
+# next chunk boundary). Each run comes back as $OUT/runK.tgz (grid.json, log/, the run with
+# its newest checkpoint, console$K.log) to be merged into the CPU grid with
+# merge_device_runs.py, which resumes it there. gpu.csv and progress.txt (metrics lines, one
+# per chunk, polled every 10 s) give the throughput.
+#
+# The machine has its own JAX (0.11.x, CUDA 13) but lacks jaxmarl and tyro: those travel as
+# wheels in .whl/ (pip download --no-deps --python-version 3.12 ... jaxmarl==0.2.0
+# tyro==1.0.17 docstring-parser typeguard==4.6.1; carry .whl). A population directory given
+# as --partners /work/main/runs/NAME (grids record its absolute path) travels as runs/NAME
+# (carry it too) and is put at that path there. float32 matmuls run at full precision
+# (JAX_DEFAULT_MATMUL_PRECISION=highest), as on CPU, not in TF32. RESUME=1 continues the
+# runs a previous call left on the same (still warm) machine.
+#
+# The paper budget (issue 35), then the Tag grid's TransAM seeds (issue 36):
+#   ARCHIVE=docs/results/paper-budget/grid RUNS="transam:0 transam:1 transam:2" \
+#   ARGS="--budget paper --envs spread --partners /work/main/runs/authors-pop --final-episodes 500" \
+#   TRAIN_S=440 bash docs/results/scripts/device_grid.sh
+#   ARCHIVE=docs/results/tag/grid RUNS="transam:0 transam:1 transam:2" ARGS="--budget medium \
+#   --envs tag --total-steps 3000000 --evals 40 --eval-episodes 100 --final-episodes 500" ...
+# (ARGS as the CPU script that owns the grid passes them: paper_budget.sh, env_grid.sh.)
+# Then here: python docs/results/scripts/merge_device_runs.py DEVICE_FILES/run*.tgz --grid RUNS_DIR
+set -uo pipefail
+: "${ARCHIVE:?}" "${ARGS:?}" "${RUNS:?}"
+TRAIN_S=${TRAIN_S:-440}
+OUT=${OUT:-/tmp/device-out}
+PY=${PY:-python3}  # PY=.venv/bin/python JAX_PLATFORMS=cpu NO_WHEELS=1: a dry run on CPU
+read -r -a runs <<< "$RUNS"
+read -r -a args <<< "$ARGS"
+((${#runs[@]} <= 6)) || { echo "at most 6 runs (8 files come back)" >&2; exit 2; }
+mkdir -p "$OUT" runs
+[[ -n "${NO_WHEELS:-}" ]] || python3 -m pip install -q --no-index --no-deps --no-compile \
+  --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
+export PYTHONPATH=/tmp/site:$PWD/src PYTHONUNBUFFERED=1 JAX_PLATFORMS=${JAX_PLATFORMS:-cuda}
+export XLA_PYTHON_CLIENT_PREALLOCATE=false JAX_DEFAULT_MATMUL_PRECISION=highest
+if [[ "$ARGS" =~ --partners\ (/work/main/(runs/[^ ]+)) && ! -d "${BASH_REMATCH[1]}" ]]; then
+  mkdir -p "$(dirname "${BASH_REMATCH[1]}")" && cp -r "${BASH_REMATCH[2]}" "${BASH_REMATCH[1]}"
+fi
+nvidia-smi -L 2>/dev/null
+"$PY" -c "import jax, flax, optax; print('jax', jax.__version__, 'flax', flax.__version__,
+'optax', optax.__version__, jax.devices())" || exit 1
+nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv -l 10 \
+  > "$OUT/gpu.csv" 2>&1 &
+smi=$!
+env=$(sed -n 's/.*--envs \([a-z]*\).*/\1/p' <<< "$ARGS")
+pids=() rels=()
+for k in "${!runs[@]}"; do
+  method=${runs[$k]%:*} seed=${runs[$k]#*:}
+  rels+=("runs/$env/$method/seed_$seed")
+  if [[ -z "${RESUME:-}" ]]; then
+    rm -rf "runs/dev$k"
+    if [[ -d "$ARCHIVE" ]]; then cp -r "$ARCHIVE" "runs/dev$k"; fi
+  fi
+  timeout -s TERM -k "${KILL_AFTER:-90}" "$TRAIN_S" "$PY" -c \
+    'import sys; from transam.cli import main; sys.argv[0] = "transam"; main()' \
+    reproduce "${args[@]}" --methods "$method" --seeds "$seed" --out "runs/dev$k" --jobs 1 \
+    > "runs/console$k.log" 2>&1 &
+  pids+=($!)
+done
+(while sleep 10; do
+  echo "$(date +%s) $(for k in "${!runs[@]}"; do
+    wc -l < "runs/dev$k/${rels[$k]}/metrics.jsonl" 2>/dev/null || echo 0; done | tr '\n' ' ')"
+done) >> "$OUT/progress.txt" &
+poll=$!
+wait "${pids[@]}"
+kill $poll $smi 2>/dev/null
+for k in "${!runs[@]}"; do
+  # the newest checkpoint only: a file over 16 MiB would not come back
+  find "runs/dev$k/${rels[$k]}" -name '*.msgpack' | sort | head -n -1 | xargs -r rm
+  tar czf "$OUT/run$k.tgz" --exclude=.lock -C "runs/dev$k" grid.json log "${rels[$k]}" \
+    -C .. "console$k.log"
+  echo "== ${runs[$k]}"; tail -n 4 "runs/console$k.log"
+done
+tail -n 2 "$OUT/progress.txt"
