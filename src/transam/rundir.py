@@ -188,6 +188,14 @@ def _from_dict(cls: type, data: dict[str, Any], where: str) -> Any:
     return cls(**kwargs)
 
 
+def read_config(path: str | Path) -> TrainConfig:
+    """The TrainConfig a config.json file holds, as saved (settings added since filled in with
+    their old values; a multi-seed run's as one config, ``out`` as recorded)."""
+    saved = with_added_settings(json.loads(Path(path).read_text()))
+    config: TrainConfig = _from_dict(TrainConfig, saved, str(path))
+    return config
+
+
 def load_run_config(run_dir: str | Path) -> TrainConfig:
     """The TrainConfig of a single-seed run directory (``out`` set to it), or of one seed's
     ``seed_S`` subdirectory of a multi-seed run."""
@@ -202,8 +210,7 @@ def load_run_config(run_dir: str | Path) -> TrainConfig:
             inside = sorted(str(c.parent) for c in run_dir.glob("*/config.json"))
             hint = f"; runs inside it: {', '.join(inside)}" if inside else ""
             raise ConfigError(f"{str(run_dir)!r} holds no transam run (no config.json){hint}")
-    saved = with_added_settings(json.loads(path.read_text()))
-    config: TrainConfig = _from_dict(TrainConfig, saved, str(path))
+    config = read_config(path)
     if seed is not None:
         seeds = range(config.seed, config.seed + config.num_seeds)
         if config.num_seeds == 1 or seed not in seeds:

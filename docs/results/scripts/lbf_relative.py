@@ -52,11 +52,9 @@ def register() -> None:
 
 
 def base_config(out: str, total_steps: int | None) -> Any:
-    from transam.rundir import _from_dict, with_added_settings
-    from transam.train.config import TrainConfig
+    from transam.rundir import read_config
 
-    saved = with_added_settings(json.loads(BASE.read_text()))
-    config = _from_dict(TrainConfig, saved, str(BASE))
+    config = read_config(BASE)
     steps = total_steps or config.total_steps
     every = config.eval.every_episodes * steps // config.total_steps
     return dataclasses.replace(
