@@ -28,8 +28,11 @@ METHODS=${METHODS:-nam liam transam}
 SEEDS=${SEEDS:-0 1 2}
 
 if [[ -z "${ARCHIVE_ONLY:-}" ]]; then
-  [[ -f "$POP/manifest.json" ]] ||
+  if [[ ! -f "$POP/manifest.json" ]]; then
     "$BIN/transam" partners import-authors spread ../shared/reference/authors-spread --out "$POP"
+    # the memoryless levels, into its manifest: `transam report` draws them from there
+    "$BIN/transam" partners diversity spread --population "$POP" --record
+  fi
   if [[ ! -f "$OUT/grid.json" && -f "$ARCHIVE/grid.json" ]]; then
     mkdir -p "$(dirname "$OUT")" && cp -r "$ARCHIVE" "$OUT"   # a new machine: restore
   fi
