@@ -419,8 +419,17 @@ def test_partial_grid_reports_what_exists_and_lists_what_is_missing(tmp_path: Pa
         unevaluated={"runs/spread/nam/seed_1"},
     )
     (tmp_path / "runs/spread/nam/seed_0/eval_heldout.json").write_text("{torn")
+    grid = json.loads((tmp_path / "grid.json").read_text())  # one run failed, one failed then
+    grid["invocations"][0]["failures"] = [  # finished on a later invocation
+        "runs/spread/transam/seed_1: RuntimeError: boom",
+        "runs/spread/nam/seed_0: BrokenProcessPool: gone",
+    ]
+    (tmp_path / "grid.json").write_text(json.dumps(grid))
     md = build_report(tmp_path).read_text()
     results = json.loads((tmp_path / "report" / "results.json").read_text())
+    assert results["compute"]["failures"] == ["runs/spread/transam/seed_1: RuntimeError: boom"]
+    assert results["compute"]["failures_of_finished_runs"] == 1
+    assert "RuntimeError: boom" in md and "BrokenProcessPool" not in md
     runs = results["runs"]
     assert runs["missing"] == ["runs/spread/transam-pool/seed_1"]
     assert runs["unfinished"] == ["runs/spread/transam/seed_1"]

@@ -301,8 +301,14 @@ def render(results: dict[str, Any], table: Table) -> str:
         ]
         lines.append(f"- Machine `{m.get('host', '?')}`: " + "; ".join(p for p in parts if p))
     if comp["failures"]:
-        lines += ["", "Failures recorded by the grid:", ""]
+        lines += ["", "Failures recorded by the grid, of runs not finished since:", ""]
         lines += [f"- `{f}`" for f in comp["failures"]]
+    if comp.get("failures_of_finished_runs"):
+        lines += [
+            "",
+            f"{comp['failures_of_finished_runs']} failure(s) recorded for runs that a later "
+            "invocation finished (grid.json's invocations list them).",
+        ]
     lines += [
         "",
         "## Runs",

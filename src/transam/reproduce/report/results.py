@@ -123,6 +123,10 @@ def compute_summary(grid: Grid) -> dict[str, Any]:
         if isinstance(m, dict) and m not in machines:
             machines.append(m)
     walls = [float(i["wall_s"]) for i in invocations if isinstance(i.get("wall_s"), int | float)]
+    # a failure ("runs/ENV/METHOD/seed_S: error") of a run that a later invocation finished is
+    # history, not a problem of the grid: counted, not listed
+    failures = [f for i in invocations for f in (i.get("failures") or [])]
+    finished = {r.rel for r in grid.runs if r.status == "finished"}
     return {
         "commands": [shlex.join(str(a) for a in i["argv"]) for i in invocations if i.get("argv")],
         "invocations": len(invocations),
@@ -130,7 +134,8 @@ def compute_summary(grid: Grid) -> dict[str, Any]:
         "invocations_with_end": len(walls),
         "wall_seconds": sum(walls),
         "run_seconds_from_logs": grid.launch_seconds,
-        "failures": [f for i in invocations for f in (i.get("failures") or [])],
+        "failures": [f for f in failures if f.split(":", 1)[0] not in finished],
+        "failures_of_finished_runs": sum(f.split(":", 1)[0] in finished for f in failures),
         "machines": machines,
     }
 
