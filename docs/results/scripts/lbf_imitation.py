@@ -1,0 +1,407 @@
+"""Issue 36, LBF: behaviour-clone H3 into NAM's policy network, then fine-tune it with A2C.
+
+Is H3 ("go to the nearest food you can load alone", ``transam.partners.lbf.heuristic``)
+representable and learnable by the network NAM trains, from what it sees, and does A2C keep it?
+Everything is the archived 3M NAM run's setting (docs/results/lbf/learnability/nam/config.json:
+the LSTM policy, the time feature, NAM's one-hot previous action as z), the default game and
+the default learned partner population; one seed.
+
+    python docs/results/scripts/lbf_imitation.py clone runs/lbf-bc [--episodes 4000] [--steps 3000]
+    python docs/results/scripts/lbf_imitation.py finetune runs/lbf-bc --variant a|b
+    python docs/results/scripts/lbf_imitation.py evaluate runs/lbf-bc/a [--episodes 500]
+
+``clone`` plays H3 as the controlled agent (one episode per parallel copy, partners balanced
+over the population as ``transam evaluate`` does; a training set and a separate validation
+set), and trains the policy's actor path (LSTM trunk and action head; the critic head gets no
+gradient) by cross-entropy on H3's actions over whole episodes: ``Policy.unroll`` from the
+zero carry on each episode's own inputs, exactly as acting computes them. It writes
+``clone.msgpack`` (the policy parameters) and ``clone.json`` (the learning curve: loss and
+teacher-forced agreement with H3 on the validation episodes).
+
+``finetune`` makes a run directory ``OUT/VARIANT`` with the trainer's own files: the runner
+state of a fresh run (``init_runner`` through the trainer's compiled ``init``, seed 0) with
+the clone's policy parameters, saved as the checkpoint of chunk 0; the trainer (``train``, the
+archived config with ``total_steps``, an evaluation every ``--every-steps`` and every
+checkpoint kept) then resumes from it, so chunk 0 is not trained by A2C. Variant ``a``: chunk
+0 is the clone itself (critic head untrained, the return normaliser fresh). Variant ``b``:
+chunk 0 is a critic warm-up, one chunk of the trainer's own updates in which the policy's
+optimiser only receives the critic head's gradient (actor, LSTM and hidden layer frozen: the
+critic is a linear read-out of the clone's features during the warm-up), which also warms the
+return normaliser; the fine-tune then continues from its optimiser state and schedule.
+
+``evaluate`` plays every checkpoint of a run (or ``--checkpoint N``) on ``--episodes``
+episodes exactly as ``transam evaluate`` does (the same program's starts, partners and keys;
+its returns are checked against that program's), sampled and greedy, and H3 on the same
+episodes, and prints return ± standard error over episodes, the policy's entropy, and its
+agreement with H3 on the states it visits itself: the share of steps where the policy's
+argmax is H3's action, counted where H3 is deterministic (a food it can load alone is left;
+otherwise H3 steps at random), and the mean probability the policy gives H3's action there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import json
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import lbf_relative  # beside this script
+import numpy as np
+import optax
+from flax import serialization
+from lbf_behaviour import rule_agent
+
+from transam.evaluation.final import _program, balanced_partners
+from transam.evaluation.weights import restore_weights
+from transam.partners import lbf as lbf_partners
+from transam.rundir import (
+    checkpoints,
+    load_run_config,
+    save_checkpoint,
+    start_run_dir,
+)
+from transam.train import a2c
+from transam.train.a2c import act, batch_carry, env_step, first_step, make_policy, policy_entropy
+from transam.train.config import TrainConfig
+from transam.train.loop import train
+from transam.train.programs import env_and_model, make_plan, program_key, run_programs
+
+# A controlled agent: (carry, x, env_state, key) -> (carry, actions [n], extra outputs).
+StepFn = Callable[[Any, Any, Any, jax.Array], tuple[Any, jax.Array, dict[str, jax.Array]]]
+
+
+def run_config(out: str = "", total_steps: int = 1_100_000, every_steps: int = 100_000) -> Any:
+    """The archived NAM run's config on the default game, one seed, every checkpoint kept."""
+    config = lbf_relative.base_config(out, total_steps, env="lbf")
+    every = every_steps // 50  # episodes of 50 steps
+    return dataclasses.replace(
+        config,
+        num_seeds=1,
+        seed=0,
+        keep_checkpoints=0,
+        eval=dataclasses.replace(config.eval, every_episodes=every),
+    )
+
+
+def h3_policy(config: TrainConfig) -> Callable[[jax.Array, jax.Array], jax.Array]:
+    env, _ = env_and_model(config)
+    return lbf_partners.heuristic(False, "own", env.game.config)
+
+
+def h3_deterministic(env_state: Any) -> jax.Array:
+    """[n] whether H3 acts by its rule (a food the controlled agent can load alone is left)."""
+    game = env_state.game
+    level = game.food_level
+    return ((level > 0) & (level <= game.agent_level[:, :1])).any(-1)
+
+
+def rollout(config: TrainConfig, n: int, key: jax.Array, step: StepFn, carry0: Any) -> Any:
+    """n episodes, one per copy, partner i mod M, keyed as ``make_episodes`` keys them (so a
+    policy's returns are those ``transam evaluate`` gives): per-step outputs [T, n]."""
+    env, _ = env_and_model(config)
+    partner = jnp.asarray(balanced_partners(n, env.num_partners))
+    k_reset, k_run = jax.random.split(key)
+    state0, obs = jax.vmap(env.reset)(jax.random.split(k_reset, n), partner)
+
+    def body(carry: Any, key: jax.Array) -> Any:
+        env_state, x, agent, alive = carry
+        k_act, k_env = jax.random.split(key)
+        det = h3_deterministic(env_state)
+        agent, action, extra = step(agent, x, env_state, k_act)
+        env_state, ts, x_next = env_step(env, k_env, env_state, action)
+        live = alive.astype(jnp.float32)
+        out = {"x": x, "action": action, "reward": ts.reward * live, "live": alive, "det": det}
+        return (env_state, x_next, agent, alive & ~ts.done), {**out, **extra}
+
+    init = (state0, first_step(obs), carry0, jnp.ones((n,), bool))
+    keys = jax.random.split(k_run, env.spec.episode_len)
+    return jax.lax.scan(body, init, keys)[1]
+
+
+def h3_step(config: TrainConfig) -> tuple[StepFn, Callable[[int], Any]]:
+    """H3 acting (lbf_behaviour's rule agent), recording the z NAM's model gives the policy."""
+    env, model = env_and_model(config)
+    _, rule = rule_agent(h3_policy(config))
+    params = model.init(jax.random.key(0), env.spec)  # NAM: no parameters
+
+    def step(mc: Any, x: Any, env_state: Any, key: jax.Array) -> Any:
+        mc, z = a2c.model_step(model, params, mc, x, a2c.partner_view(model, env_state))
+        _, action = rule((), x, env_state, key)
+        return mc, action, {"z": z}
+
+    return step, lambda n: batch_carry(model.init_carry(env.spec), n)
+
+
+def policy_step(config: TrainConfig, policy_params: Any, model_params: Any, greedy: bool) -> Any:
+    """The policy acting as in evaluation, with H3's action on the same observation beside it."""
+    env, model = env_and_model(config)
+    policy = make_policy(config, env)
+    h3 = h3_policy(config)
+
+    def step(carry: Any, x: Any, env_state: Any, key: jax.Array) -> Any:
+        pc, mc = carry
+        pc, mc, _, logits, _ = act(policy, model, policy_params, model_params, pc, mc, x, env_state)
+        if greedy:
+            action = jnp.argmax(logits, -1).astype(jnp.int32)
+        else:
+            action = jax.random.categorical(key, logits).astype(jnp.int32)
+        n = action.shape[0]
+        h3_action = jax.vmap(h3)(jax.random.split(jax.random.fold_in(key, 7), n), x.obs)
+        probs = jax.nn.softmax(logits)
+        extra = {
+            "entropy": policy_entropy(logits),
+            "agree": jnp.argmax(logits, -1) == h3_action,
+            "p_h3": jnp.take_along_axis(probs, h3_action[:, None], -1)[:, 0],
+        }
+        return (pc, mc), action, extra
+
+    def init(n: int) -> Any:
+        return (policy.init_carry((n,)), batch_carry(model.init_carry(env.spec), n))
+
+    return step, init
+
+
+# ---------------------------------------------------------------- behaviour cloning
+
+
+def demos(config: TrainConfig, n: int, seed: int) -> dict[str, Any]:
+    step, init = h3_step(config)
+    fn = jax.jit(lambda key: rollout(config, n, key, step, init(n)))
+    return jax.device_get(fn(jax.random.key(seed)))
+
+
+def clone(args: argparse.Namespace) -> None:
+    config = run_config()
+    env, _ = env_and_model(config)
+    policy = make_policy(config, env)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    tic = time.perf_counter()
+    data = demos(config, args.episodes, seed=1)
+    val = demos(config, 500, seed=2)
+    ret = data["reward"].sum(0)
+    print(
+        f"H3 demonstrations: {args.episodes} episodes, return {ret.mean():.3f} ± "
+        f"{ret.std() / np.sqrt(len(ret)):.3f}, {int(data['live'].sum())} steps "
+        f"({time.perf_counter() - tic:.0f} s)",
+        flush=True,
+    )
+    # The trainer's own fresh parameters for seed 0 (the runner state's, as finetune builds it)
+    params = run_programs(config).init(jax.random.split(jax.random.key(0))[0]).policy_params
+    tx = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(args.lr))
+    opt = tx.init(params)
+
+    def loss_fn(params: Any, batch: dict[str, Any]) -> tuple[jax.Array, dict[str, jax.Array]]:
+        b = batch["action"].shape[1]
+        _, logits, _ = policy.unroll(params, policy.init_carry((b,)), batch["x"], batch["z"])
+        nll = -jnp.take_along_axis(jax.nn.log_softmax(logits), batch["action"][..., None], -1)
+        live = batch["live"].astype(jnp.float32)
+        det = live * batch["det"]
+        hit = jnp.argmax(logits, -1) == batch["action"]
+        metrics = {
+            "agree": (hit * live).sum() / live.sum(),
+            "agree_det": (hit * det).sum() / det.sum(),
+        }
+        return (nll[..., 0] * live).sum() / live.sum(), metrics
+
+    @jax.jit
+    def train_step(params: Any, opt: Any, batch: dict[str, Any]) -> Any:
+        (loss, _), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch)
+        updates, opt = tx.update(grads, opt, params)
+        return optax.apply_updates(params, updates), opt, loss
+
+    score = jax.jit(loss_fn)
+    rng = np.random.default_rng(0)
+    curve, losses = [], []
+    for i in range(args.steps + 1):
+        if i % args.log_every == 0:
+            vloss, vm = jax.device_get(score(params, val))
+            row = {"step": i, "train_loss": float(np.mean(losses)) if losses else None}
+            row.update(val_loss=float(vloss), **{f"val_{k}": float(v) for k, v in vm.items()})
+            curve.append(row)
+            losses = []
+            print(json.dumps(row), f"{time.perf_counter() - tic:.0f} s", flush=True)
+        if i == args.steps:
+            break
+        idx = rng.choice(args.episodes, args.batch, replace=False)
+        batch = jax.tree.map(lambda a, idx=idx: a[:, idx], data)
+        params, opt, loss = train_step(params, opt, batch)
+        losses.append(float(loss))
+    (out / "clone.msgpack").write_bytes(serialization.to_bytes(params))
+    settings = {k: v for k, v in vars(args).items() if k != "func"}
+    (out / "clone.json").write_text(json.dumps({"settings": settings, "curve": curve}, indent=1))
+
+
+# ---------------------------------------------------------------- A2C fine-tune
+
+
+@contextlib.contextmanager
+def critic_only() -> Iterator[None]:
+    """While open, the trainer's updates (``make_update`` builds its optimisers with
+    ``a2c.make_optimizers``) pass the policy optimiser only the critic head's gradient: the
+    same optimiser and state (so its state is the trainer's), the other gradients zeroed."""
+    original = a2c.make_optimizers
+
+    def masked(config: TrainConfig) -> Any:
+        policy_tx, model_tx = original(config)
+
+        def keep_critic(grads: Any) -> Any:
+            def one(path: Any, g: jax.Array) -> jax.Array:
+                names = [getattr(k, "key", None) for k in path]
+                return g if "critic" in names else jnp.zeros_like(g)
+
+            return jax.tree_util.tree_map_with_path(one, grads)
+
+        def update(grads: Any, state: Any, params: Any = None) -> Any:
+            return policy_tx.update(keep_critic(grads), state, params)
+
+        return optax.GradientTransformation(policy_tx.init, update), model_tx
+
+    a2c.make_optimizers = masked
+    try:
+        yield
+    finally:
+        a2c.make_optimizers = original
+
+
+def finetune(args: argparse.Namespace) -> None:
+    run = Path(args.out) / args.variant
+    config = run_config(str(run), args.total_steps, args.every_steps)
+    if not checkpoints(run):
+        env, model = env_and_model(config)
+        state = run_programs(config).init(jax.random.split(jax.random.key(config.seed))[0])
+        cloned = serialization.from_bytes(
+            state.policy_params, (Path(args.out) / "clone.msgpack").read_bytes()
+        )
+        policy_tx, _ = a2c.make_optimizers(config)
+        state = dataclasses.replace(state, policy_params=cloned, policy_opt=policy_tx.init(cloned))
+        if args.variant == "b":
+            updates = make_plan(config, env.spec.episode_len).chunks[0]
+            with critic_only():
+                warmup = a2c.make_chunk(config, env, model, updates)
+            tic = time.perf_counter()
+            after, metrics = warmup(state)
+            m = jax.device_get(metrics)
+            before = jax.tree.leaves(
+                jax.tree.map(jnp.array_equal, state.policy_params, after.policy_params)
+            )
+            print(
+                f"critic warm-up: {updates} updates in {time.perf_counter() - tic:.0f} s, "
+                f"value loss {float(m['value_loss']):.3f}, entropy {float(m['entropy']):.3f}, "
+                f"return {float(m['return_sum']) / max(int(m['episodes']), 1):.3f}, "
+                f"unchanged parameter arrays {sum(map(bool, before))}/{len(before)}",
+                flush=True,
+            )
+            state = after
+        start_run_dir(config)
+        save_checkpoint(run, 0, jax.device_get(state))
+    result = train(dataclasses.replace(config, resume=True))
+    print(result.final)
+
+
+# ---------------------------------------------------------------- evaluation
+
+
+def mean_se(x: np.ndarray) -> str:
+    return f"{x.mean():.3f} ± {x.std() / np.sqrt(len(x)):.3f}"
+
+
+def evaluate(args: argparse.Namespace) -> None:
+    run = Path(args.run)
+    config = load_run_config(run)
+    n = args.episodes
+    key = jax.random.key(args.seed)
+    found = sorted(checkpoints(run)) if args.checkpoint is None else [args.checkpoint]
+    plays: dict[bool, Any] = {}
+
+    def play(policy_params: Any, model_params: Any, greedy: bool) -> Any:
+        step, init = policy_step(config, policy_params, model_params, greedy)
+        return rollout(config, n, key, step, init(n))
+
+    h3, h3_init = h3_step(config)
+    h3_ret = jax.device_get(jax.jit(lambda: rollout(config, n, key, h3, h3_init(n)))())["reward"]
+    print(f"{run}: {n} episodes, seed {args.seed}; H3 on them: {mean_se(h3_ret.sum(0))}")
+    print(
+        "chunk  step      sampled return   greedy return    entropy  agree(argmax=H3)  "
+        "p(H3 action)  agree greedy"
+    )
+    rows = []
+    for c in found:
+        w = restore_weights(config, run, c, [])
+        out = {}
+        for greedy in (False, True):
+            if greedy not in plays:
+                plays[greedy] = jax.jit(lambda p, m, g=greedy: play(p, m, g))
+            out[greedy] = jax.device_get(plays[greedy](w.policy_params, w.model_params))
+        if c == found[0]:  # the same episodes as transam evaluate's program
+            cfg = dataclasses.replace(config, eval=dataclasses.replace(config.eval, greedy=False))
+            partner = jnp.asarray(balanced_partners(n, env_and_model(config)[0].num_partners))
+            ref = _program(program_key(cfg), n)(w.policy_params, w.model_params, key, partner)
+            ref_ret = np.asarray(jax.device_get(ref.reward)).sum(0)
+            if not np.allclose(ref_ret, out[False]["reward"].sum(0), atol=1e-5):
+                raise AssertionError("returns differ from transam evaluate's program")
+        s, g = out[False], out[True]
+        live = s["live"].astype(bool)
+        det = live & s["det"]
+        gdet = g["live"].astype(bool) & g["det"]
+        row = {
+            "chunk": c,
+            "step": w.step,
+            "return": s["reward"].sum(0),
+            "greedy return": g["reward"].sum(0),
+            "entropy": float(s["entropy"][live].mean()),
+            "agree": float(s["agree"][det].mean()),
+            "p_h3": float(s["p_h3"][det].mean()),
+            "agree greedy": float(g["agree"][gdet].mean()),
+            "det share": float(det.sum() / live.sum()),
+        }
+        rows.append(row)
+        print(
+            f"{c:5d}  {w.step:8d}  {mean_se(row['return']):>15s}  "
+            f"{mean_se(row['greedy return']):>15s}  {row['entropy']:7.3f}  "
+            f"{row['agree']:16.3f}  {row['p_h3']:12.3f}  {row['agree greedy']:12.3f}",
+            flush=True,
+        )
+    summary = [
+        {k: (float(v.mean()) if isinstance(v, np.ndarray) else v) for k, v in r.items()}
+        | {"return_se": float(r["return"].std() / np.sqrt(n))}
+        for r in rows
+    ]
+    (run / f"imitation_eval_{n}.json").write_text(json.dumps(summary, indent=1))
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="cmd", required=True)
+    c = sub.add_parser("clone")
+    c.add_argument("out")
+    c.add_argument("--episodes", type=int, default=4000)
+    c.add_argument("--steps", type=int, default=3000)
+    c.add_argument("--batch", type=int, default=64)
+    c.add_argument("--lr", type=float, default=1e-3)
+    c.add_argument("--log-every", type=int, default=250)
+    c.set_defaults(func=clone)
+    f = sub.add_parser("finetune")
+    f.add_argument("out", help="the directory clone wrote into")
+    f.add_argument("--variant", choices=("a", "b"), required=True)
+    f.add_argument("--total-steps", type=int, default=1_100_000)
+    f.add_argument("--every-steps", type=int, default=100_000)
+    f.set_defaults(func=finetune)
+    e = sub.add_parser("evaluate")
+    e.add_argument("run")
+    e.add_argument("--episodes", type=int, default=500)
+    e.add_argument("--checkpoint", type=int, default=None)
+    e.add_argument("--seed", type=int, default=0)
+    e.set_defaults(func=evaluate)
+    args = parser.parse_args(argv)
+    args.func(args)
+
+
+if __name__ == "__main__":
+    main()
