@@ -27,7 +27,10 @@ checkpoint kept) then resumes from it, so chunk 0 is not trained by A2C. Variant
 chunk 0 is a critic warm-up, one chunk of the trainer's own updates in which the policy's
 optimiser only receives the critic head's gradient (actor, LSTM and hidden layer frozen: the
 critic is a linear read-out of the clone's features during the warm-up), which also warms the
-return normaliser; the fine-tune then continues from its optimiser state and schedule.
+return normaliser; the fine-tune then starts a fresh policy optimiser (Adam's moments of the
+frozen parameters would be zero under an advanced step count, which makes the first actor
+steps several times the learning rate), so in both variants A2C makes the same updates from
+the learning rate 3e-4 annealed linearly over the run's ``total_steps``.
 
 ``evaluate`` plays every checkpoint of a run (or ``--checkpoint N``) on ``--episodes``
 episodes exactly as ``transam evaluate`` does (the same program's starts, partners and keys;
@@ -44,6 +47,7 @@ import argparse
 import contextlib
 import dataclasses
 import json
+import shutil
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -63,6 +67,7 @@ from transam.partners import lbf as lbf_partners
 from transam.rundir import (
     checkpoints,
     load_run_config,
+    read_checkpoint,
     save_checkpoint,
     start_run_dir,
 )
@@ -146,7 +151,7 @@ def policy_step(config: TrainConfig, policy_params: Any, model_params: Any, gree
 
     def step(carry: Any, x: Any, env_state: Any, key: jax.Array) -> Any:
         pc, mc = carry
-        pc, mc, _, logits, _ = act(policy, model, policy_params, model_params, pc, mc, x, env_state)
+        pc, mc, z, logits, _ = act(policy, model, policy_params, model_params, pc, mc, x, env_state)
         if greedy:
             action = jnp.argmax(logits, -1).astype(jnp.int32)
         else:
@@ -158,6 +163,8 @@ def policy_step(config: TrainConfig, policy_params: Any, model_params: Any, gree
             "entropy": policy_entropy(logits),
             "agree": jnp.argmax(logits, -1) == h3_action,
             "p_h3": jnp.take_along_axis(probs, h3_action[:, None], -1)[:, 0],
+            "h3": h3_action,
+            "z": z,
         }
         return (pc, mc), action, extra
 
@@ -194,6 +201,8 @@ def clone(args: argparse.Namespace) -> None:
     )
     # The trainer's own fresh parameters for seed 0 (the runner state's, as finetune builds it)
     params = run_programs(config).init(jax.random.split(jax.random.key(0))[0]).policy_params
+    if args.init:
+        params = serialization.from_bytes(params, Path(args.init).read_bytes())
     tx = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(args.lr))
     opt = tx.init(params)
 
@@ -218,21 +227,48 @@ def clone(args: argparse.Namespace) -> None:
 
     score = jax.jit(loss_fn)
     rng = np.random.default_rng(0)
-    curve, losses = [], []
-    for i in range(args.steps + 1):
-        if i % args.log_every == 0:
-            vloss, vm = jax.device_get(score(params, val))
-            row = {"step": i, "train_loss": float(np.mean(losses)) if losses else None}
-            row.update(val_loss=float(vloss), **{f"val_{k}": float(v) for k, v in vm.items()})
-            curve.append(row)
-            losses = []
-            print(json.dumps(row), f"{time.perf_counter() - tic:.0f} s", flush=True)
-        if i == args.steps:
-            break
-        idx = rng.choice(args.episodes, args.batch, replace=False)
-        batch = jax.tree.map(lambda a, idx=idx: a[:, idx], data)
-        params, opt, loss = train_step(params, opt, batch)
-        losses.append(float(loss))
+    curve: list[dict[str, Any]] = []
+
+    def fit(params: Any, opt: Any, data: dict[str, Any], steps: int, start: int) -> Any:
+        losses: list[float] = []
+        for i in range(start, start + steps + 1):
+            if i % args.log_every == 0 or i == start + steps:
+                vloss, vm = jax.device_get(score(params, val))
+                row = {"step": i, "train_loss": float(np.mean(losses)) if losses else None}
+                row.update(val_loss=float(vloss), **{f"val_{k}": float(v) for k, v in vm.items()})
+                curve.append(row)
+                losses = []
+                print(json.dumps(row), f"{time.perf_counter() - tic:.0f} s", flush=True)
+            if i == start + steps:
+                return params, opt
+            n = data["action"].shape[1]
+            idx = rng.choice(n, args.batch, replace=False)
+            batch = jax.tree.map(lambda a, idx=idx: a[:, idx], data)
+            params, opt, loss = train_step(params, opt, batch)
+            losses.append(float(loss))
+        return params, opt
+
+    params, opt = fit(params, opt, data, args.steps, 0)
+    done = args.steps
+    for r in range(args.dagger):  # DAgger: H3's labels on the states the clone visits itself
+        step, init = policy_step(config, params, {}, greedy=False)
+        n = args.episodes
+        fn = jax.jit(lambda key, step=step, init=init, n=n: rollout(config, n, key, step, init(n)))
+        own = jax.device_get(fn(jax.random.key(10 + r)))
+        ret, det = own["reward"].sum(0), own["live"] & own["det"]
+        print(
+            f"DAgger round {r + 1}: the clone's own {n} episodes, return {ret.mean():.3f} ± "
+            f"{ret.std() / np.sqrt(n):.3f}, argmax = H3 on {own['agree'][det].mean():.3f} of "
+            "the steps where H3 is deterministic",
+            flush=True,
+        )
+        curve.append({"dagger_round": r + 1, "own_return": float(ret.mean())})
+        keys = ("x", "z", "live", "det")
+        new = {k: own[k] for k in keys} | {"action": own["h3"]}
+        data = {k: data[k] for k in new}
+        data = jax.tree.map(lambda a, b: np.concatenate([a, b], axis=1), data, new)
+        params, opt = fit(params, opt, data, args.dagger_steps, done)
+        done += args.dagger_steps
     (out / "clone.msgpack").write_bytes(serialization.to_bytes(params))
     settings = {k: v for k, v in vars(args).items() if k != "func"}
     (out / "clone.json").write_text(json.dumps({"settings": settings, "curve": curve}, indent=1))
@@ -271,8 +307,14 @@ def critic_only() -> Iterator[None]:
 
 
 def finetune(args: argparse.Namespace) -> None:
-    run = Path(args.out) / args.variant
+    run = Path(args.out) / (args.name or args.variant)
     config = run_config(str(run), args.total_steps, args.every_steps)
+    changes = {k: type(getattr(config.a2c, k))(v) for k, v in (s.split("=") for s in args.a2c)}
+    config = dataclasses.replace(config, a2c=dataclasses.replace(config.a2c, **changes))
+    if args.start_from and not checkpoints(run):  # a diagnostic: another run's chunk 0
+        start_run_dir(config)
+        (run / "checkpoints").mkdir()
+        shutil.copy(checkpoints(Path(args.out) / args.start_from)[0], run / "checkpoints")
     if not checkpoints(run):
         env, model = env_and_model(config)
         state = run_programs(config).init(jax.random.split(jax.random.key(config.seed))[0])
@@ -298,7 +340,10 @@ def finetune(args: argparse.Namespace) -> None:
                 f"unchanged parameter arrays {sum(map(bool, before))}/{len(before)}",
                 flush=True,
             )
-            state = after
+            # A fresh optimiser for the fine-tune, as in variant a: Adam's moments of the frozen
+            # parameters are still zero while its step count has advanced, so carried over they
+            # would make the first actor steps several times the learning rate.
+            state = dataclasses.replace(after, policy_opt=policy_tx.init(after.policy_params))
         start_run_dir(config)
         save_checkpoint(run, 0, jax.device_get(state))
     result = train(dataclasses.replace(config, resume=True))
@@ -376,6 +421,42 @@ def evaluate(args: argparse.Namespace) -> None:
     (run / f"imitation_eval_{n}.json").write_text(json.dumps(summary, indent=1))
 
 
+def advantages(args: argparse.Namespace) -> None:
+    """What the first A2C update would reinforce: the trainer's own collections (``make_collect``,
+    parameters held fixed) from a checkpoint, and the recomputed advantage (the normalised
+    return target minus the critic's value, as the update computes it) by the action taken."""
+    run = Path(args.run)
+    config = load_run_config(run)
+    env, model = env_and_model(config)
+    policy = make_policy(config, env)
+    template = run_programs(config).init(jax.random.key(0))
+    state = read_checkpoint(checkpoints(run)[args.checkpoint], jax.device_get(template))
+    collect = a2c.make_collect(config, env, model)
+    per = config.a2c.rollouts_per_collect
+
+    def one(rs: Any, key: jax.Array) -> Any:
+        rs, col = collect(rs, jax.random.split(key, per))
+        traj = col.traj
+
+        def value(t: Any) -> jax.Array:
+            return policy.unroll(rs.policy_params, t.policy_carry0, t.x, t.z)[2]
+
+        adv = col.targets - jax.vmap(value)(traj)
+        return rs, (adv, traj.action, traj.reward)
+
+    keys = jax.random.split(jax.random.key(args.seed), args.collections)
+    _, (adv, action, reward) = jax.device_get(jax.jit(lambda s: jax.lax.scan(one, s, keys))(state))
+    adv, action, reward = (np.asarray(a).ravel() for a in (adv, action, reward))
+    names = ("none", "north", "south", "west", "east")
+    groups = [(n, action == i) for i, n in enumerate(names)]
+    groups += [("load, collected", (action == 5) & (reward > 0))]
+    groups += [("load, nothing", (action == 5) & (reward <= 0))]
+    print(f"{run} chunk {args.checkpoint}: {adv.size} steps; mean advantage {adv.mean():+.3f}")
+    for name, sel in groups:
+        a = adv[sel]
+        print(f"  {name:16s} {sel.mean():6.3f} of steps, advantage {mean_se(a)}")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="cmd", required=True)
@@ -386,12 +467,18 @@ def main(argv: list[str] | None = None) -> None:
     c.add_argument("--batch", type=int, default=64)
     c.add_argument("--lr", type=float, default=1e-3)
     c.add_argument("--log-every", type=int, default=250)
+    c.add_argument("--init", default=None, help="start from these clone parameters")
+    c.add_argument("--dagger", type=int, default=0, help="DAgger rounds after the cloning")
+    c.add_argument("--dagger-steps", type=int, default=800, help="training steps per round")
     c.set_defaults(func=clone)
     f = sub.add_parser("finetune")
     f.add_argument("out", help="the directory clone wrote into")
     f.add_argument("--variant", choices=("a", "b"), required=True)
     f.add_argument("--total-steps", type=int, default=1_100_000)
     f.add_argument("--every-steps", type=int, default=100_000)
+    f.add_argument("--name", default=None, help="run directory OUT/NAME (default: the variant)")
+    f.add_argument("--a2c", action="append", default=[], help="a diagnostic: KEY=VALUE")
+    f.add_argument("--start-from", default=None, help="a diagnostic: start from OUT/RUN's chunk 0")
     f.set_defaults(func=finetune)
     e = sub.add_parser("evaluate")
     e.add_argument("run")
@@ -399,6 +486,12 @@ def main(argv: list[str] | None = None) -> None:
     e.add_argument("--checkpoint", type=int, default=None)
     e.add_argument("--seed", type=int, default=0)
     e.set_defaults(func=evaluate)
+    v = sub.add_parser("advantages")
+    v.add_argument("run")
+    v.add_argument("--checkpoint", type=int, default=0)
+    v.add_argument("--collections", type=int, default=400)
+    v.add_argument("--seed", type=int, default=0)
+    v.set_defaults(func=advantages)
     args = parser.parse_args(argv)
     args.func(args)
 
