@@ -9,6 +9,11 @@ the default learned partner population; one seed.
     python docs/results/scripts/lbf_imitation.py clone runs/lbf-bc [--episodes 4000] [--steps 3000]
     python docs/results/scripts/lbf_imitation.py finetune runs/lbf-bc --variant a|b
     python docs/results/scripts/lbf_imitation.py evaluate runs/lbf-bc/a [--episodes 500]
+    python docs/results/scripts/lbf_imitation.py clone runs/lbf-dagger \
+        --init runs/lbf-bc/clone.msgpack --steps 0 --dagger 3 --dagger-steps 700
+    python docs/results/scripts/lbf_imitation.py finetune runs/lbf-bc --variant b \
+        --start-from b --name d-vf0 --a2c vf_coef=0 [--total-steps ... --every-steps ...]
+    python docs/results/scripts/lbf_imitation.py advantages runs/lbf-bc/b [--checkpoint 0]
 
 ``clone`` plays H3 as the controlled agent (one episode per parallel copy, partners balanced
 over the population as ``transam evaluate`` does; a training set and a separate validation
@@ -17,6 +22,10 @@ gradient) by cross-entropy on H3's actions over whole episodes: ``Policy.unroll`
 zero carry on each episode's own inputs, exactly as acting computes them. It writes
 ``clone.msgpack`` (the policy parameters) and ``clone.json`` (the learning curve: loss and
 teacher-forced agreement with H3 on the validation episodes).
+
+``--dagger R`` adds R rounds of DAgger: the clone plays ``--episodes`` episodes of its own
+(sampled), H3's action on each of their steps is added to the data as the label, and training
+goes on for ``--dagger-steps``; ``--init`` starts from saved clone parameters.
 
 ``finetune`` makes a run directory ``OUT/VARIANT`` with the trainer's own files: the runner
 state of a fresh run (``init_runner`` through the trainer's compiled ``init``, seed 0) with
@@ -31,6 +40,12 @@ return normaliser; the fine-tune then starts a fresh policy optimiser (Adam's mo
 frozen parameters would be zero under an advanced step count, which makes the first actor
 steps several times the learning rate), so in both variants A2C makes the same updates from
 the learning rate 3e-4 annealed linearly over the run's ``total_steps``.
+
+Diagnostics: ``--a2c KEY=VALUE`` changes an A2C setting of the fine-tune, ``--start-from RUN``
+starts from that run's chunk 0 (e.g. b's warmed-up state), ``--name`` names the directory.
+``advantages`` runs the trainer's own collections (``make_collect``) from a checkpoint with the
+parameters held fixed and prints the advantage the update would use (normalised return target
+minus the recomputed value) by the action taken: what the first updates reinforce.
 
 ``evaluate`` plays every checkpoint of a run (or ``--checkpoint N``) on ``--episodes``
 episodes exactly as ``transam evaluate`` does (the same program's starts, partners and keys;
@@ -306,10 +321,17 @@ def critic_only() -> Iterator[None]:
         a2c.make_optimizers = original
 
 
+def setting(current: Any, text: str) -> Any:
+    """``text`` as a value of the type of the A2C setting it replaces."""
+    if isinstance(current, bool):
+        return text.lower() in ("1", "true", "yes")
+    return type(current)(text)
+
+
 def finetune(args: argparse.Namespace) -> None:
     run = Path(args.out) / (args.name or args.variant)
     config = run_config(str(run), args.total_steps, args.every_steps)
-    changes = {k: type(getattr(config.a2c, k))(v) for k, v in (s.split("=") for s in args.a2c)}
+    changes = {k: setting(getattr(config.a2c, k), v) for k, v in (s.split("=") for s in args.a2c)}
     config = dataclasses.replace(config, a2c=dataclasses.replace(config.a2c, **changes))
     if args.start_from and not checkpoints(run):  # a diagnostic: another run's chunk 0
         start_run_dir(config)
