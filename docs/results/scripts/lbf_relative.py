@@ -51,7 +51,9 @@ def register() -> None:
     )
 
 
-def base_config(out: str, total_steps: int | None) -> Any:
+def base_config(out: str, total_steps: int | None, env: str = NAME) -> Any:
+    """The archived 3M NAM run's config with ``env`` (default: this variant), ``out`` and the
+    run length (evaluations scaled to keep their number)."""
     from transam.rundir import read_config
 
     config = read_config(BASE)
@@ -59,7 +61,7 @@ def base_config(out: str, total_steps: int | None) -> Any:
     every = config.eval.every_episodes * steps // config.total_steps
     return dataclasses.replace(
         config,
-        env=NAME,
+        env=env,
         out=out,
         total_steps=steps,
         progress=False,
