@@ -10,7 +10,7 @@
 #                           7 apart), an evaluation of 100 episodes every 75k steps
 #   Overcooked   1.5M steps (learns within 1-1.5M; the evaluations of 400-step episodes
 #                           cost as much as training: 25 of 100 episodes, 200 final ones)
-#   LBF          4M steps  (not before its plateau is explained: docs/results/lbf/README.md)
+#   LBF          4M steps  (every seed reaches the plateau, which is A2C's: docs/results/lbf)
 #   spread       the medium grid (docs/results/medium/README.md): all ten methods, the
 #                `medium` budget as it is (1M steps), archived in docs/results/medium/grid
 #
