@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 
@@ -123,8 +124,10 @@ def test_local_grid_hands_out_one_run_at_a_time(monkeypatch: pytest.MonkeyPatch,
             return super().submit(fn, *args, **kwargs)
 
     def task(out: str, specs: list[grid.RunSpec], budget: grid.Budget) -> list[str]:
+        assert os.environ["XLA_PYTHON_CLIENT_PREALLOCATE"] == "false"  # processes share a GPU
         return [f"{s.rel}: failed" for s in specs if s.seed == 2]
 
+    monkeypatch.delenv("XLA_PYTHON_CLIENT_PREALLOCATE", raising=False)
     monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", Threads)
     monkeypatch.setattr(grid, "_run_group_in_subprocess", task)
     specs = [grid.RunSpec("spread", m, s) for m in ("nam", "transam") for s in range(3)]

@@ -386,7 +386,10 @@ def run_local(out: Path, specs: list[RunSpec], budget: Budget, jobs: int = 1) ->
     as one task left a core idle through the last method's later seeds). Every method's first
     seed goes first, then every second seed, and so on: by the time a method's later seed
     starts, its programs are in the persistent compilation cache, whichever process compiled
-    them. Returns the failed runs, in grid order."""
+    them. On a GPU the processes share it: each allocates GPU memory as it needs it (JAX's
+    default, taking 75% of the GPU's memory at start, would leave the second process too
+    little) unless XLA_PYTHON_CLIENT_PREALLOCATE is set. Returns the failed runs, in grid
+    order."""
     groups: dict[tuple[str, str], list[RunSpec]] = {}
     for spec in specs:
         groups.setdefault((spec.env, spec.method), []).append(spec)
@@ -394,6 +397,8 @@ def run_local(out: Path, specs: list[RunSpec], budget: Budget, jobs: int = 1) ->
         return [f for group in groups.values() for f in _run_group(str(out), group, budget)]
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
+
+    os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")  # the workers inherit it
 
     rank = {spec: i for group in groups.values() for i, spec in enumerate(group)}
     order = sorted(specs, key=lambda spec: rank[spec])  # stable: grid order within a rank
