@@ -191,6 +191,28 @@ def test_budget_overrides_reevaluate_without_retraining(smoke: Path, tmp_path: P
     assert grid.run_config(spec, budget, tmp_path / "new").total_steps == 2000
 
 
+def test_vmapped_seeds_write_the_runs_a_grid_writes(smoke: Path, tmp_path: Path) -> None:
+    """--vmap-seeds: a method's seeds train as one program; every run directory, evaluation
+    and launch record is what the grid writes, and a rerun redoes nothing."""
+    out = tmp_path / "vmapped"
+    args = ["--budget", "smoke", "--out", str(out), "--jobs", "1", "--methods", "nam"]
+    main(["reproduce", *args, "--vmap-seeds", "--envs", *ENVS, "--seeds", *map(str, SEEDS)])
+    for seed in SEEDS:
+        spec = grid.RunSpec("spread", "nam", seed)
+        mine, theirs = out / spec.rel, smoke / spec.rel
+        assert sorted(p.name for p in mine.iterdir() if p.name != "checkpoints") == sorted(
+            p.name for p in theirs.iterdir() if p.name != "checkpoints"
+        )
+        records = read_metrics(mine / "metrics.jsonl")
+        assert [r["seed"] for r in records] == [seed] * len(read_metrics(theirs / "metrics.jsonl"))
+        (train,) = [e for e in grid.read_launches(out, spec) if e["event"] == "train"]
+        assert train["vmapped_with"] == list(SEEDS)
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("*.json*")}
+    main(["reproduce", *args, "--vmap-seeds", "--envs", *ENVS, "--seeds", *map(str, SEEDS)])
+    changed = [p for p, t in before.items() if p.stat().st_mtime_ns != t]
+    assert all(p.parent == out or "report" in p.parts for p in changed), changed  # grid.json
+
+
 def test_bad_grid_arguments_fail_before_writing(tmp_path: Path, capsys) -> None:
     out = tmp_path / "g"
     with pytest.raises(SystemExit):
@@ -200,4 +222,17 @@ def test_bad_grid_arguments_fail_before_writing(tmp_path: Path, capsys) -> None:
         main(["reproduce", "--budget", "smoke", "--out", str(out), "--seeds", "0", "0"])
     with pytest.raises(SystemExit, match="final_episodes must be >= 1, got 0"):
         main(["reproduce", "--budget", "smoke", "--out", str(out), "--final-episodes", "0"])
+    with pytest.raises(SystemExit, match="--vmap-seeds runs with --backend local only"):
+        main(
+            [
+                "reproduce",
+                "--budget",
+                "smoke",
+                "--out",
+                str(out),
+                "--vmap-seeds",
+                "--backend",
+                "ray",
+            ]
+        )
     assert not out.exists()

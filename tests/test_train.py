@@ -26,11 +26,11 @@ from transam.envs.core import GameSpec, PartnerRecord, Timestep
 from transam.models.base import LocalStep, ModelDefaults
 from transam.models.policy import Policy
 from transam.models.transam import TransAMConfig
-from transam.rundir import RunDirError, _flag, read_metrics
+from transam.rundir import RunDirError, _flag, read_final, read_metrics
 from transam.train import a2c, presets
 from transam.train.config import A2CConfig, ConfigError, EvalConfig, TrainConfig
 from transam.train.episodes import make_evaluate
-from transam.train.loop import train
+from transam.train.loop import train, train_together
 from transam.train.programs import uniform_policy_eval
 
 # ------------------------------------------------------------------ toy environment and probe
@@ -435,6 +435,45 @@ def test_sequential_seeds_write_per_seed_directories(
     assert read_metrics(tmp_path / "multi" / "seed_0" / "metrics.jsonl") == records[:1]
     (seed1,) = read_metrics(tmp_path / "multi" / "seed_1" / "metrics.jsonl")
     assert seed1["seed"] == 1 and seed1["eval/return"] != records[0]["eval/return"]
+
+
+def test_runs_trained_together_are_the_vmapped_seeds_each_in_its_own_directory(
+    reference: tuple[TrainConfig, list[dict[str, Any]]], tmp_path: Path
+) -> None:
+    """``reproduce --vmap-seeds``: one-seed runs trained as one vmapped program write what
+    ``--num-seeds 2`` writes per seed, each in its own run directory, also when stopped and
+    resumed; runs at different chunks train as separate groups; a finished run is skipped."""
+    assert train(run_config(tmp_path / "multi", chunks=2, num_seeds=2)).finished
+    runs = [run_config(tmp_path / f"s{s}", chunks=2, seed=s) for s in (0, 1)]
+    assert not any(r.finished for r in train_together(runs, stop_after_chunks=1))
+    resumed = [dataclasses.replace(c, resume=True) for c in runs]
+    assert [r.finished for r in train_together(resumed)] == [True, True]
+    for s, cfg in enumerate(runs):
+        out = Path(cfg.out)
+        saved = json.loads((out / "config.json").read_text())
+        assert (saved["seed"], saved["num_seeds"]) == (s, 1)
+        records = read_metrics(out / "metrics.jsonl")
+        assert records == read_metrics(tmp_path / "multi" / f"seed_{s}" / "metrics.jsonl")
+        assert read_final(out) == [records[-1]]
+
+    # seed 0 one chunk ahead of seed 1: two groups, each finishing as it would alone
+    ahead = run_config(tmp_path / "ahead", chunks=2)
+    assert not train(ahead, stop_after_chunks=1).finished
+    behind = run_config(tmp_path / "behind", chunks=2, seed=1)
+    done = train_together([dataclasses.replace(ahead, resume=True), behind, resumed[0]])
+    assert [r.finished for r in done] == [True, True, True]
+    _, ref_records = reference  # seed 0 alone, longer (the learning rate is not annealed)
+    assert read_metrics(tmp_path / "ahead" / "metrics.jsonl") == ref_records[:2]
+    assert len(read_metrics(tmp_path / "behind" / "metrics.jsonl")) == 2
+
+
+def test_runs_trained_together_must_differ_only_in_seed(tmp_path: Path) -> None:
+    a = run_config(tmp_path / "a", chunks=1)
+    b = run_config(tmp_path / "b", chunks=1, seed=1)
+    b = dataclasses.replace(b, a2c=dataclasses.replace(b.a2c, gamma=0.5))
+    with pytest.raises(ConfigError, match="differ only in seed"):
+        train_together([a, b])
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 
 # ------------------------------------------------------------------ bad settings

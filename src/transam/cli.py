@@ -415,6 +415,10 @@ class Reproduce:
     jobs: int = 2
     """local backend: runs at a time, one process each (one training program does not keep two
     CPU cores busy)"""
+    vmap_seeds: bool = False
+    """local backend: train each (env, method)'s seeds as one vmapped program, one task per
+    method (for a GPU, where one run's program is latency-bound; on CPU NAM gains, TransAM
+    hardly); each run directory is written as if trained alone"""
     backend: Literal["local", "ray"] = "local"
     """local processes, or tasks on a Ray cluster (pip install 'transam[ray]')"""
     address: str = "auto"
@@ -455,6 +459,8 @@ class Reproduce:
                 make_env(env, partners=partners)
         out = Path(self.out)
         address = None if self.address == "local" else self.address
+        if self.backend == "ray" and self.vmap_seeds:
+            raise ConfigError("--vmap-seeds runs with --backend local only (ray: one run a task)")
         if self.backend == "ray":  # a missing Ray or a bad address fails before writing
             from transam.reproduce.grid_ray import connect
 
@@ -486,7 +492,7 @@ class Reproduce:
                 max_retries=self.max_retries,
             )
         else:
-            failures = grid.run_local(out, specs, budget, jobs=self.jobs)
+            failures = grid.run_local(out, specs, budget, self.jobs, self.vmap_seeds)
         grid.close_grid(out, failures)
         report = build_report(out)
         for f in failures:

@@ -142,42 +142,63 @@ def run_one(out: str | Path, spec: RunSpec, budget: Budget) -> dict[str, Any]:
     """Train (or resume, or skip) one grid run, then evaluate it on the training and held-out
     partners where not done yet at the budget's final episode count. Safe to call again after
     any failure; returns a summary."""
+    return run_together(out, [spec], budget)[0]
+
+
+def run_together(out: str | Path, specs: list[RunSpec], budget: Budget) -> list[dict[str, Any]]:
+    """:func:`run_one` for runs of one (env, method) whose seeds train as one vmapped program
+    (``--vmap-seeds``; :func:`transam.train.loop.train_together`: each run directory as if
+    trained alone, its launch event naming the seeds it trained with). Returns the summaries."""
     from transam.evaluation.final import evaluate_run
     from transam.rundir import EVAL_PARTNERS, checkpoints, evaluation_path
-    from transam.train.loop import train
+    from transam.train.loop import train, train_together
 
     out = Path(out)
-    config = run_config(spec, budget, out, grid_partners(out))
-    run_dir = Path(config.run_dir)
-    finished = (run_dir / "final.json").exists()
-    started = (run_dir / "config.json").exists()
-    start_chunk = max(checkpoints(run_dir), default=-1) + 1 if started else 0
+    configs = [run_config(spec, budget, out, grid_partners(out)) for spec in specs]
     tic = time.time()
-    if not finished:
-        _log(
-            out,
-            spec,
-            {
-                "event": "train",
-                "pid": os.getpid(),
-                "host": socket.gethostname(),
-                "start_chunk": start_chunk,
-                "resume": started,
-                "time": tic,
-            },
-        )
-        result = train(dataclasses.replace(config, resume=started))
+    todo = [
+        (s, c)
+        for s, c in zip(specs, configs, strict=True)
+        if not (Path(c.run_dir) / "final.json").exists()
+    ]
+    for spec, config in todo:
+        run_dir = Path(config.run_dir)
+        started = (run_dir / "config.json").exists()
+        event: dict[str, Any] = {
+            "event": "train",
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "start_chunk": max(checkpoints(run_dir), default=-1) + 1 if started else 0,
+            "resume": started,
+            "time": tic,
+        }
+        if len(todo) > 1:
+            event["vmapped_with"] = [s.seed for s, _ in todo]
+        _log(out, spec, event)
+    resumed = [
+        dataclasses.replace(c, resume=(Path(c.run_dir) / "config.json").exists()) for _, c in todo
+    ]
+    results = train_together(resumed) if len(resumed) > 1 else [train(c) for c in resumed]
+    for (spec, _), result in zip(todo, results, strict=True):
         if not result.finished:  # pragma: no cover (only a stop_after_chunks test stops early)
             raise RuntimeError(f"{spec.name}: training stopped before the end")
-    evaluated = []
-    for partners in EVAL_PARTNERS:
-        path = evaluation_path(run_dir, partners)
-        if not path.exists() or json.loads(path.read_text())["episodes"] != budget.final_episodes:
-            evaluate_run(run_dir, episodes=budget.final_episodes, partners=partners)
-            evaluated.append(partners)
-    if not finished or evaluated:
-        _log(out, spec, {"event": "done", "pid": os.getpid(), "seconds": time.time() - tic})
-    return {"run": spec.rel, "trained": not finished, "evaluated": evaluated}
+    summaries = []
+    for spec, config in zip(specs, configs, strict=True):
+        run_dir = Path(config.run_dir)
+        evaluated = []
+        for partners in EVAL_PARTNERS:
+            path = evaluation_path(run_dir, partners)
+            if (
+                not path.exists()
+                or json.loads(path.read_text())["episodes"] != budget.final_episodes
+            ):
+                evaluate_run(run_dir, episodes=budget.final_episodes, partners=partners)
+                evaluated.append(partners)
+        trained = any(spec == s for s, _ in todo)
+        if trained or evaluated:
+            _log(out, spec, {"event": "done", "pid": os.getpid(), "seconds": time.time() - tic})
+        summaries.append({"run": spec.rel, "trained": trained, "evaluated": evaluated})
+    return summaries
 
 
 ARCHIVE_SKIP = ("checkpoints", "tb", "*.png", "*.lock", "*.tmp")
@@ -360,9 +381,18 @@ def spec_from_rel(rel: str) -> RunSpec:
 Backend = Callable[[Path, list[RunSpec], Budget], list[str]]
 
 
-def _run_group(out: str, specs: list[RunSpec], budget: Budget) -> list[str]:
+def _run_group(
+    out: str, specs: list[RunSpec], budget: Budget, vmap_seeds: bool = False
+) -> list[str]:
     """Run the seeds of one (env, method) one after another in this process, so the seeds after
-    the first reuse its compiled programs; returns the failures."""
+    the first reuse its compiled programs, or with ``vmap_seeds`` as one vmapped program (a
+    failure then fails them all); returns the failures."""
+    if vmap_seeds:
+        try:
+            run_together(out, specs, budget)
+        except Exception as err:
+            return [f"{spec.rel}: {type(err).__name__}: {err}" for spec in specs]
+        return []
     failures = []
     for spec in specs:
         try:
@@ -372,29 +402,36 @@ def _run_group(out: str, specs: list[RunSpec], budget: Budget) -> list[str]:
     return failures
 
 
-def _run_group_in_subprocess(out: str, specs: list[RunSpec], budget: Budget) -> list[str]:
+def _run_group_in_subprocess(
+    out: str, specs: list[RunSpec], budget: Budget, vmap_seeds: bool = False
+) -> list[str]:
     from transam.jaxcache import enable_compilation_cache
 
     enable_compilation_cache()
-    return _run_group(out, specs, budget)
+    return _run_group(out, specs, budget, vmap_seeds)
 
 
-def run_local(out: Path, specs: list[RunSpec], budget: Budget, jobs: int = 1) -> list[str]:
+def run_local(
+    out: Path, specs: list[RunSpec], budget: Budget, jobs: int = 1, vmap_seeds: bool = False
+) -> list[str]:
     """Run the grid on this machine. With ``jobs`` > 1, that many runs train at a time in
     separate processes (one XLA:CPU training program does not keep two cores busy), handed
     out one run at a time, so no process idles while runs remain (handing out a method's seeds
     as one task left a core idle through the last method's later seeds). Every method's first
     seed goes first, then every second seed, and so on: by the time a method's later seed
     starts, its programs are in the persistent compilation cache, whichever process compiled
-    them. On a GPU the processes share it: each allocates GPU memory as it needs it (JAX's
-    default, taking 75% of the GPU's memory at start, would leave the second process too
-    little) unless XLA_PYTHON_CLIENT_PREALLOCATE is set. Returns the failed runs, in grid
-    order."""
+    them. With ``vmap_seeds`` each (env, method)'s seeds are one task, one vmapped program
+    (on a GPU, where one run's program is latency-bound). On a GPU the processes share it:
+    each allocates GPU memory as it needs it (JAX's default, taking 75% of the GPU's memory at
+    start, would leave the second process too little) unless XLA_PYTHON_CLIENT_PREALLOCATE is
+    set. Returns the failed runs, in grid order."""
     groups: dict[tuple[str, str], list[RunSpec]] = {}
     for spec in specs:
         groups.setdefault((spec.env, spec.method), []).append(spec)
     if jobs <= 1:
-        return [f for group in groups.values() for f in _run_group(str(out), group, budget)]
+        return [
+            f for group in groups.values() for f in _run_group(str(out), group, budget, vmap_seeds)
+        ]
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -403,6 +440,19 @@ def run_local(out: Path, specs: list[RunSpec], budget: Budget, jobs: int = 1) ->
     rank = {spec: i for group in groups.values() for i, spec in enumerate(group)}
     order = sorted(specs, key=lambda spec: rank[spec])  # stable: grid order within a rank
     failed: dict[RunSpec, list[str]] = {}
+    if vmap_seeds:
+        with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
+            tasks = [
+                (pool.submit(_run_group_in_subprocess, str(out), group, budget, True), group)
+                for group in groups.values()
+            ]
+            failures = []
+            for fut, group in tasks:
+                try:
+                    failures += fut.result()
+                except Exception as err:  # a worker process died: rerun the command to resume
+                    failures += [f"{spec.rel}: {type(err).__name__}: {err}" for spec in group]
+        return failures
     with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
         futures = {
             pool.submit(_run_group_in_subprocess, str(out), [spec], budget): spec for spec in order

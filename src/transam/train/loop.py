@@ -21,6 +21,7 @@ the same checkpoint with ``--seed-mode sequential`` after the diverged seed is d
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import time
@@ -52,7 +53,7 @@ from transam.rundir import (
     write_final,
 )
 from transam.train.a2c import HEALTH_KEYS, NONFINITE_QUANTITIES
-from transam.train.config import TrainConfig
+from transam.train.config import ConfigError, TrainConfig
 from transam.train.logs import TBWriter, make_record, mean_text, progress
 from transam.train.programs import Plan, env_and_model, make_plan, run_programs
 from transam.train.stop import RunInterrupted, StopRequest, stop_on_signals, wait_ready
@@ -93,23 +94,85 @@ def train(config: TrainConfig, stop_after_chunks: int | None = None) -> RunResul
             return _train_locked(config, action, stop, stop_after_chunks)
 
 
+def train_together(
+    configs: list[TrainConfig], stop_after_chunks: int | None = None
+) -> list[RunResult]:
+    """Train one-seed runs that differ only in their seed and ``--out`` as one vmapped program
+    (``transam reproduce --vmap-seeds``: a method's seeds), each run directory written as
+    :func:`train` writes it alone (config.json, metrics, checkpoints, final.json), so the grid,
+    ``--resume`` and the report see ordinary runs. Each resumes from its own checkpoints; runs
+    at different chunks train as one group per starting chunk, the furthest first."""
+    configs = [
+        dataclasses.replace(c.validate(), partners=resolve_partners(c.partners)) for c in configs
+    ]
+    shared = {dataclasses.replace(c, seed=0, out="", resume=False, force=False) for c in configs}
+    if len(shared) > 1 or any(c.num_seeds != 1 for c in configs):
+        raise ConfigError("runs trained together must be one seed each and differ only in seed/out")
+    env, _ = env_and_model(configs[0])
+    plan = make_plan(configs[0], env.spec.episode_len)
+    results: list[RunResult | None] = [None] * len(configs)
+    with contextlib.ExitStack() as stack:
+        todo = []
+        for i, config in enumerate(configs):
+            out = Path(config.run_dir)
+            if prepare_run_dir(config) != "finished":
+                stack.enter_context(run_lock(out, "transam reproduce --vmap-seeds"))
+            action = prepare_run_dir(config)  # again: now no other process writes here
+            if action == "finished":
+                results[i] = RunResult(out, [config.seed], read_final(out), finished=True)
+            else:
+                _open_run_dir(config, action, env.spec.episode_len)
+                todo.append(i)
+        stop = stack.enter_context(stop_on_signals())
+        start = {i: max(checkpoints(Path(configs[i].run_dir)), default=-1) for i in todo}
+        budget = [stop_after_chunks]
+        for chunk in sorted(set(start.values()), reverse=True):
+            group = [i for i in todo if start[i] == chunk]
+            if stop.signum:  # arrived during the last chunk of the previous group
+                raise RunInterrupted(
+                    stop.signum,
+                    f"stopped by {stop.name} before seeds "
+                    f"{', '.join(str(configs[i].seed) for i in group)} started; run the same "
+                    "command again to resume",
+                )
+            dirs = [Path(configs[i].run_dir) for i in group]
+            finals = _run_group(
+                configs[group[0]], plan, [configs[i].seed for i in group], dirs, budget, stop
+            )
+            if finals is None:
+                break
+            for i, d, rec in zip(group, dirs, finals, strict=True):
+                write_final(d, [rec])
+                results[i] = RunResult(d, [configs[i].seed], [rec], finished=True)
+    return [
+        r or RunResult(Path(c.run_dir), [c.seed], [], finished=False)
+        for r, c in zip(results, configs, strict=True)
+    ]
+
+
+def _open_run_dir(config: TrainConfig, action: str, episode_len: int) -> None:
+    """Make a locked ``--out`` ready to train in as ``action`` (of prepare_run_dir) says."""
+    out = Path(config.run_dir)
+    if out.exists() and config.force:
+        clean_run_dir(out)
+    if action == "extend":
+        _check_extension(config, episode_len)
+        extend_run_dir(config)
+    if action == "fresh" or not (out / "config.json").exists():
+        start_run_dir(config)
+    for d in seed_dirs(config):
+        d.mkdir(parents=True, exist_ok=True)
+
+
 def _train_locked(
     config: TrainConfig, action: str, stop: StopRequest, stop_after_chunks: int | None
 ) -> RunResult:
     out = Path(config.run_dir)
     seeds = [config.seed + i for i in range(config.num_seeds)]
     dirs = seed_dirs(config)
-    if out.exists() and config.force:
-        clean_run_dir(out)
     env, _ = env_and_model(config)
     plan = make_plan(config, env.spec.episode_len)
-    if action == "extend":
-        _check_extension(config, env.spec.episode_len)
-        extend_run_dir(config)
-    if action == "fresh" or not (out / "config.json").exists():
-        start_run_dir(config)
-    for d in dirs:
-        d.mkdir(parents=True, exist_ok=True)
+    _open_run_dir(config, action, env.spec.episode_len)
 
     groups = [list(range(len(seeds)))]
     if config.seed_mode == "sequential" and len(seeds) > 1:
