@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # A grid's runs on a lent GPU machine, for the minutes a session has one (issues 35, 36): each
-# run of RUNS ("METHOD:SEED ...", at most 6) in its own `transam reproduce` process, side by
-# side on the one GPU (the program is latency-bound: docs/performance.md#on-a-gpu), each
+# entry of RUNS ("METHOD:SEED ...", at most 6; "METHOD:S1,S2" trains those seeds as one
+# vmapped program, --vmap-seeds) in its own `transam reproduce` process, side by side on the
+# one GPU (the program is latency-bound: docs/performance.md#on-a-gpu), each
 # started from the grid's archive (ARCHIVE: a carried run resumes from its checkpoint; none
 # there, a new grid) and stopped with SIGTERM after TRAIN_S seconds (it checkpoints at its
 # next chunk boundary). Each run comes back as $OUT/runK.tgz (grid.json, log/, the run with
@@ -50,29 +51,36 @@ smi=$!
 env=$(sed -n 's/.*--envs \([a-z]*\).*/\1/p' <<< "$ARGS")
 pids=() rels=()
 for k in "${!runs[@]}"; do
-  method=${runs[$k]%:*} seed=${runs[$k]#*:}
-  rels+=("runs/$env/$method/seed_$seed")
+  method=${runs[$k]%:*} seeds=${runs[$k]#*:}  # METHOD:S1,S2: one vmapped program (--vmap-seeds)
+  read -r -a seed_list <<< "${seeds//,/ }"
+  vmap=() && ((${#seed_list[@]} > 1)) && vmap=(--vmap-seeds)
+  rels+=("$(printf "runs/$env/$method/seed_%s " "${seed_list[@]}")")
   if [[ -z "${RESUME:-}" ]]; then
     rm -rf "runs/dev$k"
     if [[ -d "$ARCHIVE" ]]; then cp -r "$ARCHIVE" "runs/dev$k"; fi
   fi
   timeout -s TERM -k "${KILL_AFTER:-90}" "$TRAIN_S" "$PY" -c \
     'import sys; from transam.cli import main; sys.argv[0] = "transam"; main()' \
-    reproduce "${args[@]}" --methods "$method" --seeds "$seed" --out "runs/dev$k" --jobs 1 \
+    reproduce "${args[@]}" --methods "$method" --seeds "${seed_list[@]}" "${vmap[@]}" \
+    --out "runs/dev$k" --jobs 1 \
     > "runs/console$k.log" 2>&1 &
   pids+=($!)
 done
 (while sleep 10; do
   echo "$(date +%s) $(for k in "${!runs[@]}"; do
-    wc -l < "runs/dev$k/${rels[$k]}/metrics.jsonl" 2>/dev/null || echo 0; done | tr '\n' ' ')"
+    first=${rels[$k]%% *}
+    wc -l < "runs/dev$k/$first/metrics.jsonl" 2>/dev/null || echo 0; done | tr '\n' ' ')"
 done) >> "$OUT/progress.txt" &
 poll=$!
 wait "${pids[@]}"
 kill $poll $smi 2>/dev/null
 for k in "${!runs[@]}"; do
   # the newest checkpoint only: a file over 16 MiB would not come back
-  find "runs/dev$k/${rels[$k]}" -name '*.msgpack' | sort | head -n -1 | xargs -r rm
-  tar czf "$OUT/run$k.tgz" --exclude=.lock -C "runs/dev$k" grid.json log "${rels[$k]}" \
+  read -r -a rel_list <<< "${rels[$k]}"
+  for rel in "${rel_list[@]}"; do
+    find "runs/dev$k/$rel" -name '*.msgpack' | sort | head -n -1 | xargs -r rm
+  done
+  tar czf "$OUT/run$k.tgz" --exclude=.lock -C "runs/dev$k" grid.json log "${rel_list[@]}" \
     -C .. "console$k.log"
   echo "== ${runs[$k]}"; tail -n 4 "runs/console$k.log"
 done
