@@ -123,7 +123,9 @@ def test_local_grid_hands_out_one_run_at_a_time(monkeypatch: pytest.MonkeyPatch,
             submitted.append([s.rel for s in args[1]])
             return super().submit(fn, *args, **kwargs)
 
-    def task(out: str, specs: list[grid.RunSpec], budget: grid.Budget) -> list[str]:
+    def task(
+        out: str, specs: list[grid.RunSpec], budget: grid.Budget, vmap_seeds: bool
+    ) -> list[str]:
         assert os.environ["XLA_PYTHON_CLIENT_PREALLOCATE"] == "false"  # processes share a GPU
         return [f"{s.rel}: failed" for s in specs if s.seed == 2]
 
@@ -134,3 +136,7 @@ def test_local_grid_hands_out_one_run_at_a_time(monkeypatch: pytest.MonkeyPatch,
     failures = grid.run_local(tmp_path, specs, grid.BUDGETS["smoke"], jobs=2)
     assert submitted == [[s.rel] for k in range(3) for s in specs if s.seed == k]
     assert failures == [f"{s.rel}: failed" for s in specs if s.seed == 2]  # in grid order
+    submitted.clear()  # --vmap-seeds: a method's seeds are one task
+    failures = grid.run_local(tmp_path, specs, grid.BUDGETS["smoke"], jobs=2, vmap_seeds=True)
+    assert submitted == [[s.rel for s in specs if s.method == m] for m in ("nam", "transam")]
+    assert failures == [f"{s.rel}: failed" for s in specs if s.seed == 2]

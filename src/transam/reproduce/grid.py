@@ -161,9 +161,11 @@ def run_together(out: str | Path, specs: list[RunSpec], budget: Budget) -> list[
         for s, c in zip(specs, configs, strict=True)
         if not (Path(c.run_dir) / "final.json").exists()
     ]
+    resumed = []
     for spec, config in todo:
         run_dir = Path(config.run_dir)
         started = (run_dir / "config.json").exists()
+        resumed.append(dataclasses.replace(config, resume=started))
         event: dict[str, Any] = {
             "event": "train",
             "pid": os.getpid(),
@@ -175,9 +177,6 @@ def run_together(out: str | Path, specs: list[RunSpec], budget: Budget) -> list[
         if len(todo) > 1:
             event["vmapped_with"] = [s.seed for s, _ in todo]
         _log(out, spec, event)
-    resumed = [
-        dataclasses.replace(c, resume=(Path(c.run_dir) / "config.json").exists()) for _, c in todo
-    ]
     results = train_together(resumed) if len(resumed) > 1 else [train(c) for c in resumed]
     for (spec, _), result in zip(todo, results, strict=True):
         if not result.finished:  # pragma: no cover (only a stop_after_chunks test stops early)
@@ -439,27 +438,18 @@ def run_local(
 
     rank = {spec: i for group in groups.values() for i, spec in enumerate(group)}
     order = sorted(specs, key=lambda spec: rank[spec])  # stable: grid order within a rank
+    tasks = list(groups.values()) if vmap_seeds else [[spec] for spec in order]
     failed: dict[RunSpec, list[str]] = {}
-    if vmap_seeds:
-        with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
-            tasks = [
-                (pool.submit(_run_group_in_subprocess, str(out), group, budget, True), group)
-                for group in groups.values()
-            ]
-            failures = []
-            for fut, group in tasks:
-                try:
-                    failures += fut.result()
-                except Exception as err:  # a worker process died: rerun the command to resume
-                    failures += [f"{spec.rel}: {type(err).__name__}: {err}" for spec in group]
-        return failures
     with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
-        futures = {
-            pool.submit(_run_group_in_subprocess, str(out), [spec], budget): spec for spec in order
-        }
-        for fut, spec in futures.items():
+        futures = [
+            (pool.submit(_run_group_in_subprocess, str(out), task, budget, vmap_seeds), task)
+            for task in tasks
+        ]
+        for fut, task in futures:
             try:
-                failed[spec] = fut.result()
+                found = fut.result()
             except Exception as err:  # a worker process died: rerun the command to resume
-                failed[spec] = [f"{spec.rel}: {type(err).__name__}: {err}"]
+                found = [f"{spec.rel}: {type(err).__name__}: {err}" for spec in task]
+            for spec in task:
+                failed[spec] = [f for f in found if f.startswith(f"{spec.rel}:")]
     return [f for spec in specs for f in failed.get(spec, [])]
