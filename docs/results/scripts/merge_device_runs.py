@@ -66,6 +66,9 @@ def main() -> None:
     parser.add_argument("tarballs", nargs="+", type=Path)
     parser.add_argument("--grid", type=Path, default=Path("runs/paper-budget"))
     args = parser.parse_args()
+    missing = [str(t) for t in args.tarballs if not t.is_file()]
+    if missing:
+        parser.error(f"no such tarball: {', '.join(missing)} (device_grid.sh's runK.tgz)")
     for tarball in args.tarballs:
         for line in merge(tarball, args.grid):
             print(f"{tarball}: {line}")
