@@ -2,9 +2,11 @@
 action from the controlled agent's last K observations (the current one and the K-1 changes
 between successive ones; none before the episode's start), for each K given. K=1 and K=2 are
 the recorded "own view" levels (``transam partners diversity``); K = the agent model's context
-(5 for TransAM) is what its window holds. Random controlled agent, every 4th episode of each
-team held out, the levels' own MLP (:func:`transam.partners.diversity.memoryless_accuracy`,
-view ``ownK``).
+(5 for TransAM) is what its window holds; K = the episode's length (25 on Spread), all of
+its history, what a recurrent encoder (LIAM's) can hold. Random controlled agent (or, on
+Spread, ``--agent landmark``: the landmark rule, whose states are nearer a trained policy's),
+every 4th episode of each team held out, the levels' own MLP
+(:func:`transam.partners.diversity.memoryless_accuracy`, view ``ownK``).
 
     python docs/results/scripts/window_levels.py --population runs/authors-pop --k 1 2 3 5 \
         --out runs/own-window/levels_1024.json
@@ -32,11 +34,20 @@ def main() -> None:
     ap.add_argument("--k", type=int, nargs="+", default=[1, 2, 3, 5])
     ap.add_argument("--episodes", type=int, default=1024, help="episodes per team")
     ap.add_argument("--train-steps", type=int, default=20_000)
+    ap.add_argument("--agent", choices=("random", "landmark"), default="random")
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args()
     env = make_env(args.env, partners=args.population)
-    steps = collect_partner_steps(env, args.episodes, 0)
-    out = {"env": args.env, "population": args.population, "episodes_per_team": args.episodes}
+    controlled = None
+    if args.agent == "landmark":
+        from transam.partners.spread import landmark_agent as controlled
+    steps = collect_partner_steps(env, args.episodes, 0, controlled)
+    out = {
+        "env": args.env,
+        "population": args.population,
+        "agent": args.agent,
+        "episodes_per_team": args.episodes,
+    }
     cfg = LevelsConfig(train_steps=args.train_steps)
     for k in args.k:
         t0 = time.time()
