@@ -1,14 +1,19 @@
 #!/usr/bin/env bash
-# A grid's runs on a lent GPU machine, for the minutes a session has one (issues 35, 36): each
-# entry of RUNS ("METHOD:SEED ...", at most 6; "METHOD:S1,S2" trains those seeds as one
-# vmapped program, --vmap-seeds) in its own `transam reproduce` process, side by side on the
-# one GPU (the program is latency-bound: docs/performance.md#on-a-gpu), each
-# started from the grid's archive (ARCHIVE: a carried run resumes from its checkpoint; none
+# Grids' runs on a lent GPU machine, for the minutes a session has one (issues 35, 36): each
+# entry of RUNS ("METHOD:SEED ...", at most 6 in all; "METHOD:S1,S2" trains those seeds as
+# one vmapped program, --vmap-seeds) in its own `transam reproduce` process, side by side on
+# the one GPU (the program is latency-bound: docs/performance.md#on-a-gpu), each
+# started from its grid's archive (ARCHIVE: a carried run resumes from its checkpoint; none
 # there, a new grid) and stopped with SIGTERM after TRAIN_S seconds (it checkpoints at its
-# next chunk boundary). Each run comes back as $OUT/runK.tgz (grid.json, log/, the run with
-# its newest checkpoint, console$K.log) to be merged into the CPU grid with
-# merge_device_runs.py, which resumes it there. gpu.csv and progress.txt (metrics lines, one
-# per chunk, polled every 10 s) give the throughput.
+# next chunk boundary). Each run comes back as $OUT/runK-GRID.tgz (GRID: the archive's folder
+# name, e.g. paper-budget or tag; grid.json, log/, the run with its newest checkpoint,
+# console$K.log) to be merged into that grid on the CPU with merge_device_runs.py, which
+# resumes it there. gpu.csv and progress.txt (metrics lines, one per chunk, polled every 10 s)
+# give the throughput. What comes back is at most 8 files of 16 MiB, 64 MiB in all: a
+# TransAM checkpoint is about 8 MB (7.8 gzipped), so 6 runs, or a vmapped pair per entry.
+#
+# Several grids in one call: GRIDS, one line per grid, "ARCHIVE | ARGS | RUNS" (as the
+# variables of those names give one grid); without GRIDS, the one grid ARCHIVE, ARGS, RUNS.
 #
 # The machine has its own JAX (0.11.x, CUDA 13) but lacks jaxmarl and tyro: those travel as
 # wheels in .whl/ (pip download --no-deps --python-version 3.12 ... jaxmarl==0.2.0
@@ -18,46 +23,62 @@
 # (JAX_DEFAULT_MATMUL_PRECISION=highest), as on CPU, not in TF32. RESUME=1 continues the
 # runs a previous call left on the same (still warm) machine.
 #
-# The paper budget (issue 35), then the Tag grid's TransAM seeds (issue 36):
-#   ARCHIVE=docs/results/paper-budget/grid RUNS="transam:0 transam:1 transam:2" \
-#   ARGS="--budget paper --envs spread --partners /work/main/runs/authors-pop --final-episodes 500" \
+# The paper budget's TransAM seeds 1-2 (issue 35) and the Tag grid's TransAM seeds (issue 36)
+# in one call (ARGS as the CPU script that owns each grid passes them: paper_budget.sh,
+# env_grid.sh):
+#   GRIDS="docs/results/paper-budget/grid | --budget paper --envs spread \
+#   --partners /work/main/runs/authors-pop --final-episodes 500 | transam:1 transam:2
+#   docs/results/tag/grid | --budget medium --envs tag --total-steps 3000000 --evals 40 \
+#   --eval-episodes 100 --final-episodes 500 | transam:0 transam:1 transam:2" \
 #   TRAIN_S=440 bash docs/results/scripts/device_grid.sh
-#   ARCHIVE=docs/results/tag/grid RUNS="transam:0 transam:1 transam:2" ARGS="--budget medium \
-#   --envs tag --total-steps 3000000 --evals 40 --eval-episodes 100 --final-episodes 500" ...
-# (ARGS as the CPU script that owns the grid passes them: paper_budget.sh, env_grid.sh.)
-# Then here: python docs/results/scripts/merge_device_runs.py DEVICE_FILES/run*.tgz --grid RUNS_DIR
+# Then here, per grid: python docs/results/scripts/merge_device_runs.py \
+#   DEVICE_FILES/run*-paper-budget.tgz --grid runs/paper-budget   (runs/grid-tag for tag)
 set -uo pipefail
-: "${ARCHIVE:?}" "${ARGS:?}" "${RUNS:?}"
+GRIDS=${GRIDS:-"${ARCHIVE:?set GRIDS, or ARCHIVE, ARGS and RUNS} | ${ARGS:?} | ${RUNS:?}"}
 TRAIN_S=${TRAIN_S:-440}
 OUT=${OUT:-/tmp/device-out}
 PY=${PY:-python3}  # PY=.venv/bin/python JAX_PLATFORMS=cpu NO_WHEELS=1: a dry run on CPU
-read -r -a runs <<< "$RUNS"
-read -r -a args <<< "$ARGS"
-((${#runs[@]} <= 6)) || { echo "at most 6 runs (8 files come back)" >&2; exit 2; }
+trim() { sed 's/^ *//; s/ *$//' <<< "$1"; }
+# one entry per process: its grid's archive, its ARGS, its METHOD:SEEDS
+archives=() argsets=() runs=()
+while IFS= read -r line; do
+  [[ -z "$(trim "$line")" ]] && continue
+  IFS='|' read -r archive grid_args grid_runs <<< "$line"
+  archive=$(trim "$archive") grid_args=$(trim "$grid_args")
+  [[ -n "$archive" && -n "$grid_args" && -n "$(trim "$grid_runs")" ]] ||
+    { echo "GRIDS line '$line': want 'ARCHIVE | ARGS | RUNS'" >&2; exit 2; }
+  for r in $grid_runs; do archives+=("$archive") argsets+=("$grid_args") runs+=("$r"); done
+done <<< "$GRIDS"
+((${#runs[@]} <= 6)) || { echo "at most 6 runs in all (8 files come back)" >&2; exit 2; }
 mkdir -p "$OUT" runs
 [[ -n "${NO_WHEELS:-}" ]] || python3 -m pip install -q --no-index --no-deps --no-compile \
   --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
 export PYTHONPATH=/tmp/site:$PWD/src PYTHONUNBUFFERED=1 JAX_PLATFORMS=${JAX_PLATFORMS:-cuda}
 export XLA_PYTHON_CLIENT_PREALLOCATE=false JAX_DEFAULT_MATMUL_PRECISION=highest
-if [[ "$ARGS" =~ --partners\ (/work/main/(runs/[^ ]+)) && ! -d "${BASH_REMATCH[1]}" ]]; then
-  mkdir -p "$(dirname "${BASH_REMATCH[1]}")" && cp -r "${BASH_REMATCH[2]}" "${BASH_REMATCH[1]}"
-fi
+for grid_args in "${argsets[@]}"; do
+  if [[ "$grid_args" =~ --partners\ (/work/main/(runs/[^ ]+)) && ! -d "${BASH_REMATCH[1]}" ]]; then
+    mkdir -p "$(dirname "${BASH_REMATCH[1]}")" && cp -r "${BASH_REMATCH[2]}" "${BASH_REMATCH[1]}"
+  fi
+done
 nvidia-smi -L 2>/dev/null
 "$PY" -c "import jax, flax, optax; print('jax', jax.__version__, 'flax', flax.__version__,
 'optax', optax.__version__, jax.devices())" || exit 1
 nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv -l 10 \
   > "$OUT/gpu.csv" 2>&1 &
 smi=$!
-env=$(sed -n 's/.*--envs \([a-z]*\).*/\1/p' <<< "$ARGS")
-pids=() rels=()
+pids=() rels=() names=()
 for k in "${!runs[@]}"; do
+  read -r -a args <<< "${argsets[$k]}"
+  env=$(sed -n 's/.*--envs \([a-z]*\).*/\1/p' <<< "${argsets[$k]}")
+  name=${archives[$k]%/} && [[ "$(basename "$name")" == grid ]] && name=$(dirname "$name")
+  names+=("$(basename "$name")")
   method=${runs[$k]%:*} seeds=${runs[$k]#*:}  # METHOD:S1,S2: one vmapped program (--vmap-seeds)
   read -r -a seed_list <<< "${seeds//,/ }"
   vmap=() && ((${#seed_list[@]} > 1)) && vmap=(--vmap-seeds)
   rels+=("$(printf "runs/$env/$method/seed_%s " "${seed_list[@]}")")
   if [[ -z "${RESUME:-}" ]]; then
     rm -rf "runs/dev$k"
-    if [[ -d "$ARCHIVE" ]]; then cp -r "$ARCHIVE" "runs/dev$k"; fi
+    if [[ -d "${archives[$k]}" ]]; then cp -r "${archives[$k]}" "runs/dev$k"; fi
   fi
   timeout -s TERM -k "${KILL_AFTER:-90}" "$TRAIN_S" "$PY" -c \
     'import sys; from transam.cli import main; sys.argv[0] = "transam"; main()' \
@@ -80,8 +101,10 @@ for k in "${!runs[@]}"; do
   for rel in "${rel_list[@]}"; do
     find "runs/dev$k/$rel" -name '*.msgpack' | sort | head -n -1 | xargs -r rm
   done
-  tar czf "$OUT/run$k.tgz" --exclude=.lock -C "runs/dev$k" grid.json log "${rel_list[@]}" \
+  tgz="$OUT/run$k-${names[$k]}.tgz"
+  tar czf "$tgz" --exclude=.lock -C "runs/dev$k" grid.json log "${rel_list[@]}" \
     -C .. "console$k.log"
-  echo "== ${runs[$k]}"; tail -n 4 "runs/console$k.log"
+  echo "== ${names[$k]} ${runs[$k]}: $(du -h "$tgz" | cut -f1)"; tail -n 4 "runs/console$k.log"
+  (($(stat -c %s "$tgz") < 16 * 1024 * 1024)) || echo "WARNING: $tgz is over 16 MiB: it will not come back"
 done
 tail -n 2 "$OUT/progress.txt"

@@ -1,4 +1,4 @@
-"""Merge runs trained on a lent GPU machine (device_grid.sh's runK.tgz) into a grid.
+"""Merge runs trained on a lent GPU machine (device_grid.sh's runK-GRID.tgz) into a grid.
 
 Each tarball holds a grid as the device left it (grid.json, log/, the one run it trained,
 runs/ENV/METHOD/seed_S, with its newest checkpoint). A run replaces the grid's copy only
@@ -7,7 +7,8 @@ machine record says "gpu") are appended to grid.json and its log lines to log/, 
 says where every chunk was trained. The grid then resumes the runs with the same `transam
 reproduce` command (paper_budget.sh, env_grid.sh); a grid not here yet starts as the device's.
 
-    python docs/results/scripts/merge_device_runs.py DEVICE_FILES/run*.tgz --grid runs/paper-budget
+    python docs/results/scripts/merge_device_runs.py DEVICE_FILES/run*-paper-budget.tgz \
+        --grid runs/paper-budget
 """
 
 from __future__ import annotations
@@ -38,8 +39,12 @@ def merge(tarball: Path, grid_dir: Path) -> list[str]:
             (grid_dir / "log").mkdir(parents=True, exist_ok=True)
             write_json(grid_dir / "grid.json", {**device, "runs": [], "invocations": []})
         grid = json.loads((grid_dir / "grid.json").read_text())
-        if device["budget_settings"]["total_steps"] != grid["budget_settings"]["total_steps"]:
-            raise SystemExit(f"{tarball}: another budget than {grid_dir}'s")
+        for key in ("budget_settings", "partners"):  # a tarball of another grid
+            if device.get(key) != grid.get(key):
+                raise SystemExit(
+                    f"{tarball}: {key} {device.get(key)} is not {grid_dir}'s {grid.get(key)}; "
+                    "merge each device_grid.sh tarball (runK-GRID.tgz) into its own grid"
+                )
         for rel in device["runs"]:
             run, mine = src / rel, grid_dir / rel
             if not (run / "config.json").exists() or _chunks(run) <= _chunks(mine):
@@ -68,7 +73,7 @@ def main() -> None:
     args = parser.parse_args()
     missing = [str(t) for t in args.tarballs if not t.is_file()]
     if missing:
-        parser.error(f"no such tarball: {', '.join(missing)} (device_grid.sh's runK.tgz)")
+        parser.error(f"no such tarball: {', '.join(missing)} (device_grid.sh's runK-GRID.tgz)")
     for tarball in args.tarballs:
         for line in merge(tarball, args.grid):
             print(f"{tarball}: {line}")
