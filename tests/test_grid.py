@@ -106,6 +106,43 @@ def test_reproduce_refuses_an_unknown_population_before_writing(tmp_path) -> Non
     assert not out.exists()
 
 
+def test_local_grid_stops_on_sigterm(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    """SIGTERM to a grid with --jobs 2 (e.g. `kill` of the `transam reproduce` process, whose
+    workers it used to leave training) stops it as it stops one run: the signal reaches each
+    run in flight once, those runs stop as at a chunk's end, no other run starts, and the grid
+    raises RunInterrupted (the CLI then exits 143: rerunning resumes). Real worker processes,
+    with a task that waits for the stop request instead of training."""
+    import multiprocessing as mp
+    import signal
+    import threading
+    import time
+
+    from grid_stop_task import wait_for_stop
+
+    from transam.train.stop import RunInterrupted
+
+    assert threading.current_thread() is threading.main_thread()  # where signals are caught
+    monkeypatch.setattr(grid, "_run_group_in_subprocess", wait_for_stop)
+    specs = [grid.RunSpec("spread", "nam", s) for s in range(4)]
+    before = signal.getsignal(signal.SIGTERM)
+
+    def terminate_when_two_started() -> None:
+        deadline = time.monotonic() + 120
+        while len(list(tmp_path.glob("started-*"))) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=terminate_when_two_started, daemon=True).start()
+    with pytest.raises(RunInterrupted, match="SIGTERM: the grid stopped") as stopped:
+        grid.run_local(tmp_path, specs, grid.BUDGETS["smoke"], jobs=2)
+    assert stopped.value.signum == signal.SIGTERM
+    started = sorted(p.name.removeprefix("started-") for p in tmp_path.glob("started-*"))
+    assert len(started) == 2  # the other two never started
+    assert sorted(p.name.removeprefix("stopped-") for p in tmp_path.glob("stopped-*")) == started
+    assert not mp.active_children()  # the pool is gone: no worker left training
+    assert signal.getsignal(signal.SIGTERM) == before  # restored
+
+
 def test_local_grid_hands_out_one_run_at_a_time(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
     """With --jobs > 1 each run is its own task, first seeds first: a method's later seeds do
     not wait behind its first while another process idles (the tail of the 2026-12 medium
@@ -116,11 +153,11 @@ def test_local_grid_hands_out_one_run_at_a_time(monkeypatch: pytest.MonkeyPatch,
     submitted: list[list[str]] = []
 
     class Threads(concurrent.futures.ThreadPoolExecutor):
-        def __init__(self, jobs: int, mp_context: object = None) -> None:
-            super().__init__(jobs)
+        def __init__(self, jobs: int, mp_context: object = None, initializer: Any = None) -> None:
+            super().__init__(jobs)  # not the initializer: it gives a worker its own process group
 
         def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> Any:
-            submitted.append([s.rel for s in args[1]])
+            submitted.append([s.rel for s in args[2]])  # (_in_worker's) task, out, specs, ...
             return super().submit(fn, *args, **kwargs)
 
     def task(

@@ -16,13 +16,15 @@ been evaluated. A backend therefore only has to call it (again, after a failure)
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
 import platform
+import signal
 import socket
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -410,6 +412,77 @@ def _run_group_in_subprocess(
     return _run_group(out, specs, budget, vmap_seeds)
 
 
+_worker_stopped: int | None = None
+"""In a worker process of :func:`run_local`: the signal that interrupted one of its runs."""
+
+
+def _worker_init() -> None:
+    """A worker in a process group of its own: a terminal's Ctrl-C (sent to the foreground
+    group) reaches it only as the parent forwards it, once, not twice (the second signal
+    would stop its run at once instead of at the chunk's end)."""
+    os.setpgrp()
+
+
+def _in_worker(fn: Callable[..., list[str]], *args: Any) -> list[str]:
+    """Run a task in a worker, unless a signal already interrupted one of this worker's runs
+    (a task the pool had queued before the stop must not start a run)."""
+    from transam.train.stop import RunInterrupted
+
+    global _worker_stopped
+    if _worker_stopped is not None:
+        raise RunInterrupted(_worker_stopped, "not started: the grid is stopping")
+    try:
+        return fn(*args)
+    except RunInterrupted as err:
+        _worker_stopped = err.signum
+        raise
+
+
+class _GridStop:
+    """The parent's side of stopping :func:`run_local`'s worker processes on SIGINT/SIGTERM:
+    the first signal cancels the tasks not yet started and is forwarded to every worker (each
+    run in flight checkpoints at its chunk's end and stops); a second is forwarded too (the
+    workers stop at once). A run interrupted in a worker stops the grid the same way."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self.futures: list[Any] = []
+
+    def note(self, signum: int) -> None:
+        if self.signum is None:
+            self.signum = signum
+        for fut in self.futures:
+            fut.cancel()  # only those not yet handed to a worker
+
+    def _forward(self, signum: int, frame: Any) -> None:
+        import multiprocessing as mp
+
+        self.note(signum)
+        for child in mp.active_children():
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(child.pid, signum)  # type: ignore[arg-type]
+
+    @contextlib.contextmanager
+    def forwarding(self) -> Iterator[None]:
+        """Forward SIGINT/SIGTERM for the duration (main thread only: elsewhere signals cannot
+        be caught, and they keep their actions)."""
+        import threading
+
+        from transam.train.stop import STOP_SIGNALS
+
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+        for s in STOP_SIGNALS:
+            signal.signal(s, self._forward)
+        try:
+            yield
+        finally:
+            for s, h in previous.items():
+                signal.signal(s, h)
+
+
 def run_local(
     out: Path, specs: list[RunSpec], budget: Budget, jobs: int = 1, vmap_seeds: bool = False
 ) -> list[str]:
@@ -423,7 +496,9 @@ def run_local(
     (on a GPU, where one run's program is latency-bound). On a GPU the processes share it:
     each allocates GPU memory as it needs it (JAX's default, taking 75% of the GPU's memory at
     start, would leave the second process too little) unless XLA_PYTHON_CLIENT_PREALLOCATE is
-    set. Returns the failed runs, in grid order."""
+    set. SIGINT or SIGTERM stops the grid as it stops one run: each run in flight checkpoints
+    at its chunk's end, none starts after, and :class:`~transam.train.stop.RunInterrupted` is
+    raised (rerunning the command resumes). Returns the failed runs, in grid order."""
     groups: dict[tuple[str, str], list[RunSpec]] = {}
     for spec in specs:
         groups.setdefault((spec.env, spec.method), []).append(spec)
@@ -434,22 +509,42 @@ def run_local(
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
+    from transam.train.stop import RunInterrupted
+
     os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")  # the workers inherit it
 
     rank = {spec: i for group in groups.values() for i, spec in enumerate(group)}
     order = sorted(specs, key=lambda spec: rank[spec])  # stable: grid order within a rank
     tasks = list(groups.values()) if vmap_seeds else [[spec] for spec in order]
     failed: dict[RunSpec, list[str]] = {}
-    with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
-        futures = [
-            (pool.submit(_run_group_in_subprocess, str(out), task, budget, vmap_seeds), task)
+    stop = _GridStop()
+    context = mp.get_context("spawn")
+    with (
+        stop.forwarding(),
+        ProcessPoolExecutor(jobs, mp_context=context, initializer=_worker_init) as pool,
+    ):
+        stop.futures = [
+            pool.submit(_in_worker, _run_group_in_subprocess, str(out), task, budget, vmap_seeds)
             for task in tasks
         ]
-        for fut, task in futures:
+        for fut, task in zip(stop.futures, tasks, strict=True):
+            if fut.cancelled():
+                continue
             try:
                 found = fut.result()
+            except KeyboardInterrupt as err:  # RunInterrupted in the worker: the grid stops
+                stop.note(getattr(err, "signum", signal.SIGINT))
+                continue
             except Exception as err:  # a worker process died: rerun the command to resume
+                if fut.cancelled() or stop.signum is not None:
+                    continue  # stopped (a second signal ends the workers at once), not failed
                 found = [f"{spec.rel}: {type(err).__name__}: {err}" for spec in task]
             for spec in task:
                 failed[spec] = [f for f in found if f.startswith(f"{spec.rel}:")]
+    if stop.signum is not None:
+        raise RunInterrupted(
+            stop.signum,
+            f"{signal.Signals(stop.signum).name}: the grid stopped; every run in flight kept "
+            "its last checkpoint",
+        )
     return [f for spec in specs for f in failed.get(spec, [])]

@@ -34,6 +34,10 @@ class RunInterrupted(KeyboardInterrupt):
     def __str__(self) -> str:
         return self.message
 
+    def __reduce__(self) -> tuple[type, tuple[int, str]]:
+        # picklable with both arguments: a grid's worker process sends it to the parent
+        return (RunInterrupted, (self.signum, self.message))
+
 
 class StopRequest:
     """Set by the first SIGINT/SIGTERM; the loop reads it at chunk boundaries."""
