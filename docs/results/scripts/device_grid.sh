@@ -12,6 +12,13 @@
 # give the throughput. What comes back is at most 8 files of 16 MiB, 64 MiB in all: a
 # TransAM checkpoint is about 8 MB (7.8 gzipped), so 6 runs, or a vmapped pair per entry.
 #
+# The working tree travels (tracked and untracked files, plus what `carry` names: at most
+# 64 MiB). Without the carried checkpoints it is about 21 MB; each carried TransAM checkpoint
+# in docs/results/*/grid adds 8.4 MB, so 5 of them fit beside the wheels. Before a call,
+# delete from the working tree the carried checkpoints of runs the call does not train, and
+# restore them afterwards from git (`git checkout -- docs/results`); check the size with
+#   (git ls-files -co --exclude-standard; find .whl runs/authors-pop -type f) | xargs du -cb | tail -1
+#
 # Several grids in one call: GRIDS, one line per grid, "ARCHIVE | ARGS | RUNS" (as the
 # variables of those names give one grid); without GRIDS, the one grid ARCHIVE, ARGS, RUNS.
 #
