@@ -76,7 +76,7 @@ import optax
 from flax import serialization
 from lbf_behaviour import rule_agent
 
-from transam.evaluation.final import _program, balanced_partners
+from transam.evaluation.final import balanced_partners, episodes_program
 from transam.evaluation.weights import restore_weights
 from transam.partners import lbf as lbf_partners
 from transam.rundir import (
@@ -409,7 +409,8 @@ def evaluate(args: argparse.Namespace) -> None:
         if c == found[0]:  # the same episodes as transam evaluate's program
             cfg = dataclasses.replace(config, eval=dataclasses.replace(config.eval, greedy=False))
             partner = jnp.asarray(balanced_partners(n, env_and_model(config)[0].num_partners))
-            ref = _program(program_key(cfg), n)(w.policy_params, w.model_params, key, partner)
+            reference = episodes_program(program_key(cfg), n)
+            ref = reference(w.policy_params, w.model_params, key, partner)
             ref_ret = np.asarray(jax.device_get(ref.reward)).sum(0)
             if not np.allclose(ref_ret, out[False]["reward"].sum(0), atol=1e-5):
                 raise AssertionError("returns differ from transam evaluate's program")

@@ -113,9 +113,11 @@ def balanced_partners(n: int, num_partners: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=8)
-def _program(config: TrainConfig, n: int) -> Callable[..., Any]:
-    """The jitted rollout of ``n`` episodes (cached: a grid evaluates many runs of one
-    program in one process)."""
+def episodes_program(config: TrainConfig, n: int) -> Callable[..., Any]:
+    """The jitted rollout of ``n`` episodes that every evaluation here plays
+    (:func:`transam.train.episodes.make_episodes` with the all-positions metrics), for a
+    config keyed by :func:`transam.train.programs.program_key`: cached, since a grid
+    evaluates many runs of one program in one process."""
     from transam.train.episodes import make_episodes
     from transam.train.programs import env_and_model
 
@@ -151,7 +153,7 @@ def _play(
     run_dir = resolve_run(run_dir)
     config = load_run_config(run_dir)
     w = restore_weights(config, run_dir, None, [])
-    run = _program(program_key(config), episodes)
+    run = episodes_program(program_key(config), episodes)
     num_partners = env_and_model(config)[0].num_partners
     partner_ids = jnp.asarray(balanced_partners(episodes, num_partners))
     out = []
@@ -191,7 +193,7 @@ def evaluate_starts(
         notes: list[str] = []
         w = restore_weights(config, run_dir, checkpoint, notes)
         acting = _acting(config, dropout, notes)
-        run = _program(program_key(acting), st.episodes)
+        run = episodes_program(program_key(acting), st.episodes)
         ep = jax.device_get(
             run(
                 w.policy_params,
@@ -333,7 +335,7 @@ def _evaluate_locked(
     env, model = env_and_model(eval_config)
     teams = env.population.team_names
     partner_ids = balanced_partners(episodes, env.num_partners)
-    run = _program(program_key(eval_config), episodes)
+    run = episodes_program(program_key(eval_config), episodes)
     ep = jax.device_get(
         run(w.policy_params, w.model_params, jax.random.key(seed), jnp.asarray(partner_ids))
     )
