@@ -419,8 +419,9 @@ _worker_stopped: int | None = None
 def _worker_init() -> None:
     """A worker in a process group of its own: a terminal's Ctrl-C (sent to the foreground
     group) reaches it only as the parent forwards it, once, not twice (the second signal
-    would stop its run at once instead of at the chunk's end)."""
-    os.setpgrp()
+    would stop its run at once instead of at the chunk's end). POSIX only."""
+    if hasattr(os, "setpgrp"):
+        os.setpgrp()
 
 
 def _in_worker(fn: Callable[..., list[str]], *args: Any) -> list[str]:
