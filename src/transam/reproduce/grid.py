@@ -24,7 +24,7 @@ import platform
 import signal
 import socket
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -463,25 +463,11 @@ class _GridStop:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(child.pid, signum)  # type: ignore[arg-type]
 
-    @contextlib.contextmanager
-    def forwarding(self) -> Iterator[None]:
-        """Forward SIGINT/SIGTERM for the duration (main thread only: elsewhere signals cannot
-        be caught, and they keep their actions)."""
-        import threading
+    def forwarding(self) -> contextlib.AbstractContextManager[None]:
+        """Forward SIGINT/SIGTERM for the duration (main thread only)."""
+        from transam.train.stop import handling_stop_signals
 
-        from transam.train.stop import STOP_SIGNALS
-
-        if threading.current_thread() is not threading.main_thread():
-            yield
-            return
-        previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
-        for s in STOP_SIGNALS:
-            signal.signal(s, self._forward)
-        try:
-            yield
-        finally:
-            for s, h in previous.items():
-                signal.signal(s, h)
+        return handling_stop_signals(self._forward)
 
 
 def run_local(
@@ -537,8 +523,8 @@ def run_local(
                 stop.note(getattr(err, "signum", signal.SIGINT))
                 continue
             except Exception as err:  # a worker process died: rerun the command to resume
-                if fut.cancelled() or stop.signum is not None:
-                    continue  # stopped (a second signal ends the workers at once), not failed
+                if stop.signum is not None:  # cancelled, or its worker ended by a second signal
+                    continue  # stopped, not failed
                 found = [f"{spec.rel}: {type(err).__name__}: {err}" for spec in task]
             for spec in task:
                 failed[spec] = [f for f in found if f.startswith(f"{spec.rel}:")]

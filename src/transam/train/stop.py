@@ -16,7 +16,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import jax
@@ -54,14 +54,27 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 @contextlib.contextmanager
+def handling_stop_signals(handler: Callable[[int, Any], None]) -> Iterator[None]:
+    """``handler`` for SIGINT and SIGTERM for the duration, then the previous handlers again
+    (main thread only: elsewhere signals cannot be caught, and they keep their actions)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    for s in STOP_SIGNALS:
+        signal.signal(s, handler)
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+@contextlib.contextmanager
 def stop_on_signals() -> Iterator[StopRequest]:
     """Catch the first SIGINT/SIGTERM as a stop request for the duration (main thread only:
     elsewhere signals cannot be caught and the request never comes)."""
     request = StopRequest()
-    if threading.current_thread() is not threading.main_thread():
-        yield request
-        return
-    previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
 
     def handler(signum: int, frame: Any) -> None:
         request.signum = signum
@@ -75,13 +88,8 @@ def stop_on_signals() -> Iterator[StopRequest]:
             flush=True,
         )
 
-    for s in STOP_SIGNALS:
-        signal.signal(s, handler)
-    try:
+    with handling_stop_signals(handler):
         yield request
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
 
 
 def wait_ready(tree: Any, poll_s: float = 0.02) -> None:
