@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+import subprocess
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -273,3 +274,24 @@ def test_example_trains_and_evaluates(tmp_path: Path, capsys: pytest.CaptureFixt
     assert set(found["per_partner_return"]) == {"covered", "decoyed", "alone", "lure"}
     printed = capsys.readouterr().out
     assert "vs lure" in printed and "partner probe accuracy" in printed
+
+
+def test_our_games_import_only_the_jaxmarl_modules_they_use_and_jaxmarl_stays_whole() -> None:
+    """Spread, Tag and Overcooked import jaxmarl's modules without its package ``__init__``s
+    (which import every environment jaxmarl has: 5 s of each process's start); a later
+    ``import jaxmarl`` is the whole package, with the same classes, and prints nothing."""
+    code = """if True:
+        import sys
+        import transam.envs.overcooked, transam.envs.spread, transam.envs.tag
+        loaded = [m for m in sys.modules if m.startswith("jaxmarl.environments.s")]
+        assert loaded == ["jaxmarl.environments.spaces"], loaded  # not smax, storm...
+        from jaxmarl.environments.mpe.simple_spread import SimpleSpreadMPE
+        import jaxmarl
+        assert type(jaxmarl.make("MPE_simple_spread_v3")) is SimpleSpreadMPE
+        from jaxmarl.environments import SMAX, Overcooked
+        assert Overcooked is transam.envs.overcooked.Overcooked
+        assert jaxmarl.environments.mpe.SimpleSpreadMPE is SimpleSpreadMPE
+        print("whole")
+    """
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert (done.returncode, done.stdout) == (0, "whole\n"), done.stderr[-2000:]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from transam import make_env as make
-from transam._quiet import quiet
+from transam._quiet import jaxmarl_modules
 from transam.envs.overcooked import (
     DISH,
     EMPTY,
@@ -38,7 +38,7 @@ from transam.partners.overcooked import (
     scripted,
 )
 
-with quiet():
+with jaxmarl_modules():
     from jaxmarl.environments.overcooked.common import DIR_TO_VEC, make_overcooked_map
 
 GAME = OvercookedGame(Config())

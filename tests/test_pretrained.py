@@ -17,7 +17,7 @@ from transam.partners.learned import population_digest
 from transam.reproduce.report.results import partner_levels
 from transam.rundir import load_run_config, recorded_population
 
-EPISODES = 300  # the paired difference's standard error is about 0.25 on Spread
+EPISODES = 100  # the paired gain over random play: 3.8-5.7, standard error 0.64-0.68 (seed 11)
 SEED = 11  # not the evaluation seeds the shipped run was chosen on (0 and 7)
 
 
@@ -50,7 +50,7 @@ def test_shipped_run_beats_random_play_and_the_memoryless_level(name: str, tmp_p
         levels = partner_levels([config.env])[config.env]
         assert levels is not None
         # past the two-step level: more than the partners' motion (the shipped TransAM: 0.63
-        # against 0.57 on 1,000 episodes)
+        # against 0.57, on 1,000 episodes and on these 100)
         assert res[ACC_NEWEST] > levels["memoryless_own2_accuracy"] + 0.03, res[ACC_NEWEST]
 
 

@@ -48,10 +48,10 @@ import jax.numpy as jnp
 import numpy as np
 from flax.core.frozen_dict import FrozenDict
 
-from transam._quiet import quiet
+from transam._quiet import jaxmarl_modules
 from transam.envs.core import ControlledEnv, EnvError, GameSpec
 
-with quiet():
+with jaxmarl_modules():
     from jaxmarl.environments.overcooked import Overcooked, overcooked_layouts
     from jaxmarl.environments.overcooked.common import OBJECT_TO_INDEX
     from jaxmarl.environments.overcooked.overcooked import State

@@ -54,12 +54,12 @@ from dataclasses import dataclass
 import jax
 import jax.numpy as jnp
 
-from transam._quiet import quiet
+from transam._quiet import jaxmarl_modules
 from transam.envs.core import MPE_ACTION_NAMES, ControlledEnv, EnvError, ForkIntegrator, GameSpec
 from transam.envs.joint import JointView
 from transam.envs.population import PolicyFn, Population
 
-with quiet():
+with jaxmarl_modules():
     from jaxmarl.environments.mpe.simple import State
     from jaxmarl.environments.mpe.simple_tag import SimpleTagMPE
 
