@@ -338,6 +338,32 @@ def _run_config(out: Path, chunks: int, **kw: Any) -> TrainConfig:
     )
 
 
+# The bookkeeping tests (prefixes, kill and resume, seeds trained together) compare short runs
+# of the same settings on 16 envs, with a chunk of 10 updates (32 episodes, 800 steps) and 32
+# evaluation episodes: what they check does not depend on how much a run learns.
+SHORT_CHUNK_STEPS = 10 * 16 * 5
+SHORT_CHUNKS = 4
+
+
+def short_config(out: Path, chunks: int = SHORT_CHUNKS, **kw: Any) -> TrainConfig:
+    cfg = run_config(out, chunks, **kw)
+    return dataclasses.replace(
+        cfg,
+        total_steps=chunks * SHORT_CHUNK_STEPS,
+        a2c=dataclasses.replace(cfg.a2c, num_envs=16),
+        eval=EvalConfig(every_episodes=32, episodes=32),
+    )
+
+
+@pytest.fixture(scope="module")
+def short_reference(tmp_path_factory: pytest.TempPathFactory) -> list[dict[str, Any]]:
+    cfg = short_config(tmp_path_factory.mktemp("runs") / "short")
+    assert train(cfg).finished
+    records = read_metrics(Path(cfg.out) / "metrics.jsonl")
+    assert [r["step"] for r in records] == [SHORT_CHUNK_STEPS * (c + 1) for c in range(4)]
+    return records
+
+
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory: pytest.TempPathFactory) -> tuple[TrainConfig, list[dict[str, Any]]]:
     cfg = run_config(tmp_path_factory.mktemp("runs") / "ref")
@@ -368,18 +394,17 @@ def test_run_writes_its_directory_and_beats_random(
 
 
 def test_same_seed_same_metrics_and_short_run_is_a_prefix(
-    reference: tuple[TrainConfig, list[dict[str, Any]]], tmp_path: Path
+    short_reference: list[dict[str, Any]], tmp_path: Path
 ) -> None:
-    _, records = reference
-    train(run_config(tmp_path / "a", chunks=1))
-    assert read_metrics(tmp_path / "a" / "metrics.jsonl") == records[:1]
+    train(short_config(tmp_path / "a", chunks=1))
+    assert read_metrics(tmp_path / "a" / "metrics.jsonl") == short_reference[:1]
 
 
 def test_kill_and_resume_gives_identical_metrics(
-    reference: tuple[TrainConfig, list[dict[str, Any]]], tmp_path: Path
+    short_reference: list[dict[str, Any]], tmp_path: Path
 ) -> None:
-    _, records = reference
-    cfg = run_config(tmp_path / "run", chunks=4, checkpoint_every=2)
+    records = short_reference
+    cfg = short_config(tmp_path / "run", chunks=4, checkpoint_every=2)
     # "Killed" after 3 chunks: metrics of chunk 3 are written, its checkpoint is not.
     assert not train(cfg, stop_after_chunks=3).finished
     assert not (tmp_path / "run" / "final.json").exists()
@@ -412,7 +437,7 @@ def test_kill_and_resume_gives_identical_metrics(
     with pytest.raises(RunDirError, match=r"no run in --out"):
         train(dataclasses.replace(cfg, out=str(tmp_path / "nothing"), resume=True))
     assert not (tmp_path / "nothing").exists()
-    assert train(dataclasses.replace(cfg, total_steps=CHUNK_STEPS, force=True)).finished
+    assert train(dataclasses.replace(cfg, total_steps=SHORT_CHUNK_STEPS, force=True)).finished
     assert read_metrics(tmp_path / "run" / "metrics.jsonl") == records[:1]
 
 
@@ -424,10 +449,10 @@ def test_resume_errors_name_the_flag_that_gives_the_runs_value() -> None:
 
 
 def test_sequential_seeds_write_per_seed_directories(
-    reference: tuple[TrainConfig, list[dict[str, Any]]], tmp_path: Path
+    short_reference: list[dict[str, Any]], tmp_path: Path
 ) -> None:
-    _, records = reference
-    cfg = run_config(tmp_path / "multi", chunks=1, num_seeds=2, seed_mode="sequential")
+    records = short_reference
+    cfg = short_config(tmp_path / "multi", chunks=1, num_seeds=2, seed_mode="sequential")
     result = train(cfg)
     assert result.seeds == [0, 1] and result.finished
     assert (tmp_path / "multi" / "config.json").exists()
@@ -438,13 +463,13 @@ def test_sequential_seeds_write_per_seed_directories(
 
 
 def test_runs_trained_together_are_the_vmapped_seeds_each_in_its_own_directory(
-    reference: tuple[TrainConfig, list[dict[str, Any]]], tmp_path: Path
+    short_reference: list[dict[str, Any]], tmp_path: Path
 ) -> None:
     """``reproduce --vmap-seeds``: one-seed runs trained as one vmapped program write what
     ``--num-seeds 2`` writes per seed, each in its own run directory, also when stopped and
     resumed; runs at different chunks train as separate groups; a finished run is skipped."""
-    assert train(run_config(tmp_path / "multi", chunks=2, num_seeds=2)).finished
-    runs = [run_config(tmp_path / f"s{s}", chunks=2, seed=s) for s in (0, 1)]
+    assert train(short_config(tmp_path / "multi", chunks=2, num_seeds=2)).finished
+    runs = [short_config(tmp_path / f"s{s}", chunks=2, seed=s) for s in (0, 1)]
     assert not any(r.finished for r in train_together(runs, stop_after_chunks=1))
     resumed = [dataclasses.replace(c, resume=True) for c in runs]
     assert [r.finished for r in train_together(resumed)] == [True, True]
@@ -457,13 +482,13 @@ def test_runs_trained_together_are_the_vmapped_seeds_each_in_its_own_directory(
         assert read_final(out) == [records[-1]]
 
     # seed 0 one chunk ahead of seed 1: two groups, each finishing as it would alone
-    ahead = run_config(tmp_path / "ahead", chunks=2)
+    ahead = short_config(tmp_path / "ahead", chunks=2)
     assert not train(ahead, stop_after_chunks=1).finished
-    behind = run_config(tmp_path / "behind", chunks=2, seed=1)
+    behind = short_config(tmp_path / "behind", chunks=2, seed=1)
     done = train_together([dataclasses.replace(ahead, resume=True), behind, resumed[0]])
     assert [r.finished for r in done] == [True, True, True]
-    _, ref_records = reference  # seed 0 alone, longer (the learning rate is not annealed)
-    assert read_metrics(tmp_path / "ahead" / "metrics.jsonl") == ref_records[:2]
+    # seed 0 alone, longer (the learning rate is not annealed)
+    assert read_metrics(tmp_path / "ahead" / "metrics.jsonl") == short_reference[:2]
     assert len(read_metrics(tmp_path / "behind" / "metrics.jsonl")) == 2
 
 
