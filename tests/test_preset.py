@@ -19,6 +19,7 @@ import pytest
 import tyro
 from flax import struct
 
+from transam import make_env
 from transam.cli import _preset_in, command
 from transam.envs.core import GameSpec, PartnerRecord, Timestep
 from transam.models.base import LocalStep, ModelDefaults
@@ -603,6 +604,29 @@ def test_torch_init_of_the_policy() -> None:
     q = Policy(3, hidden).init(jax.random.key(0), 4, 2)["params"]
     assert np.abs(q["actor"]["kernel"]).max() < 0.02  # orthogonal, gain 0.01
     assert str(jax.tree.structure(p)) == str(jax.tree.structure(q))  # old checkpoints load
+
+
+def test_z_scale_multiplies_the_embedding_in_the_policy_input() -> None:
+    """``a2c.z_scale``: the policy on (o, z) with scale s equals the policy on (o, s z) with
+    scale 1; at 0 it ignores z; a negative scale is refused by name."""
+    obs, z = jnp.ones((3, 4)), jax.random.normal(jax.random.key(1), (3, 2)) * 10.0
+    first = jnp.ones((3,), bool)
+    plain = Policy(5, 8)
+    params = plain.init(jax.random.key(0), 4, 2)
+    carry = plain.init_carry((3,))
+
+    def logits(policy: Policy, z_in: jax.Array) -> np.ndarray:
+        return np.asarray(policy.net.apply(params, carry, obs, z_in, first)[1])
+
+    half = dataclasses.replace(plain, z_scale=0.5)
+    np.testing.assert_allclose(logits(half, z), logits(plain, 0.5 * z), rtol=1e-6)
+    assert not np.allclose(logits(half, z), logits(plain, z))
+    blind = dataclasses.replace(plain, z_scale=0.0)
+    np.testing.assert_array_equal(logits(blind, z), logits(blind, -z))
+    cfg = TrainConfig(a2c=A2CConfig(z_scale=0.088))
+    assert a2c.make_policy(cfg, make_env("spread")).z_scale == 0.088
+    with pytest.raises(ConfigError, match=r"a2c\.z_scale must be in \[0\.0, inf\], got -1"):
+        TrainConfig(a2c=A2CConfig(z_scale=-1.0)).validate()
 
 
 def test_anneal_over_anneal_steps_not_the_run() -> None:

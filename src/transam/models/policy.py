@@ -77,6 +77,7 @@ class ActorCriticLSTM(nn.Module):
     hidden: int = 128
     critic_z: bool = True
     torch_init: bool = False  # PyTorch's default initialisation (the reference) if set
+    z_scale: float = 1.0  # the factor on z in the input (a2c.z_scale)
 
     @nn.compact
     def __call__(
@@ -84,7 +85,7 @@ class ActorCriticLSTM(nn.Module):
     ) -> tuple[LSTMCarry, jax.Array, jax.Array]:
         keep = ~first[..., None]
         carry = (jnp.where(keep, carry[0], 0.0), jnp.where(keep, carry[1], 0.0))
-        x = jnp.concatenate([obs, z], axis=-1)
+        x = jnp.concatenate([obs, self.z_scale * z], axis=-1)
         torch_init = self.torch_init
         if self.critic_z:
             carry, h = _trunk(self.hidden, carry, x, "", torch_init)
@@ -117,10 +118,13 @@ class Policy:
     horizon: int | None = None  # append t / horizon to the input (None: observation only)
     critic_z: bool = True  # the critic reads z through the shared trunk (else its own, no z)
     torch_init: bool = False  # PyTorch's default initialisation (the reference's) if set
+    z_scale: float = 1.0  # the factor on z in the input (a2c.z_scale)
 
     @property
     def net(self) -> ActorCriticLSTM:
-        return ActorCriticLSTM(self.num_actions, self.hidden, self.critic_z, self.torch_init)
+        return ActorCriticLSTM(
+            self.num_actions, self.hidden, self.critic_z, self.torch_init, self.z_scale
+        )
 
     def init(self, key: jax.Array, obs_dim: int, z_dim: int) -> Params:
         """Fresh parameters for observations of width ``obs_dim`` and embeddings of ``z_dim``."""

@@ -157,6 +157,7 @@ def make_policy(config: TrainConfig, env: ControlledEnv) -> Policy:
         horizon=horizon,
         critic_z=a.critic_z,
         torch_init=a.init == "torch",
+        z_scale=a.z_scale,
     )
 
 

@@ -128,6 +128,11 @@ class A2CConfig:
     forward pass per update), or a second pass with a fresh dropout mask ('separate'). Only
     the TransAM family has such a pass; the other methods always make their own (the same
     numbers either way: they have no dropout)"""
+    z_scale: float = 1.0
+    """the factor on z in the policy's input, concat(o_t, z_scale * z_t) (default 1, the
+    reference's raw z). TransAM's post-norm encoder puts out |z| = sqrt(width), about 11,
+    whatever the window; LIAM's z is about 1, and so is a game's observation: a diagnostic of
+    whether the embedding's size drowns the observation (0: the policy ignores z)"""
 
 
 @dataclass(frozen=True)
@@ -243,6 +248,7 @@ class TrainConfig:
         _in_range("a2c.gae_lambda", a.gae_lambda, 0.0, 1.0)
         _in_range("a2c.ent_coef", a.ent_coef, 0.0, math.inf)
         _in_range("a2c.vf_coef", a.vf_coef, 0.0, math.inf)
+        _in_range("a2c.z_scale", a.z_scale, 0.0, math.inf)
         _in_range("a2c.model_lr", a.model_lr, 0.0, math.inf)
         for name in ("lr", "adam_eps", "model_adam_eps", "max_grad_norm"):
             _positive(f"a2c.{name}", getattr(a, name))
@@ -325,6 +331,7 @@ ADDED_SETTINGS: dict[tuple[str, str], Any] = {
     ("a2c", "recompute_z"): False,
     ("a2c", "z_pass"): "separate",
     ("a2c", "model_passes"): 1,
+    ("a2c", "z_scale"): 1.0,
     ("model", "embed_ln"): True,
     ("model", "init"): "default",
     ("model", "action_loss"): "ce",

@@ -94,6 +94,7 @@ AUTHORS: tuple[Setting, ...] = (
         "Agent: actor and critic heads on one LSTM + fc1 trunk that reads concat(o, E^o)",
     ),
     Setting("a2c.time_feature", False, "Agent input: concat(o_t, E^o_t), no clock"),
+    Setting("a2c.z_scale", 1.0, "Agent input: E^o_t as the encoder puts it out, unscaled"),
     Setting(
         "a2c.init",
         "torch",
