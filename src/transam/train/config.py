@@ -131,7 +131,7 @@ class A2CConfig:
     z_scale: float = 1.0
     """the factor on z in the policy's input, concat(o_t, z_scale * z_t) (default 1, the
     reference's raw z). TransAM's post-norm encoder puts out |z| = sqrt(width), about 11,
-    whatever the window; LIAM's z is about 1, and so is a game's observation: a diagnostic of
+    whatever the window, beside observations of norm 3-38 and LIAM's z of 1-3: a diagnostic of
     whether the embedding's size drowns the observation (0: the policy ignores z)"""
 
 
