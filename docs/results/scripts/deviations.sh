@@ -74,6 +74,7 @@ ROWS=(
 CANDIDATES=(
   "model_lr_1e3|--a2c.model-lr 1e-3"
   "model_passes_2|--a2c.model-passes 2"
+  "z_scale_unit|--a2c.z-scale 0.088"
 )
 
 selected() {
