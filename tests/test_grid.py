@@ -11,6 +11,7 @@ from transam import registry
 from transam.compose import make_env
 from transam.reproduce import grid
 from transam.train.config import ConfigError
+from transam.train.presets import parse_settings
 from transam.train.programs import make_plan
 
 
@@ -177,3 +178,41 @@ def test_local_grid_hands_out_one_run_at_a_time(monkeypatch: pytest.MonkeyPatch,
     failures = grid.run_local(tmp_path, specs, grid.BUDGETS["smoke"], jobs=2, vmap_seeds=True)
     assert submitted == [[s.rel for s in specs if s.method == m] for m in ("nam", "transam")]
     assert failures == [f"{s.rel}: failed" for s in specs if s.seed == 2]
+
+
+def test_settings_parse_to_typed_values_and_bad_ones_are_named() -> None:
+    settings = parse_settings(["a2c.z_scale=0.088", "model.dropout=0"])
+    assert settings == {"a2c.z_scale": 0.088, "model.dropout": 0.0}
+    assert type(settings["model.dropout"]) is float  # an integer given for a float setting
+    assert parse_settings(["a2c.time-feature=false", "a2c.advantage=gae"]) == {
+        "a2c.time_feature": False,
+        "a2c.advantage": "gae",
+    }
+    for bad, message in (
+        ("a2c.zscale=1", r"unknown setting 'a2c.zscale'; valid a2c settings: .*z_scale"),
+        ("total_steps=3", r"GROUP.NAME=VALUE with GROUP one of a2c, model, baseline"),
+        ("a2c.z_scale", r"GROUP.NAME=VALUE"),
+        ("a2c.time_feature=3", r"'a2c.time_feature' takes a bool \(default True\), got '3'"),
+        ("a2c.num_envs=2.5", r"'a2c.num_envs' takes a int \(default 10\), got '2.5'"),
+        ("a2c.z_scale=-1", r"a2c.z_scale must be in \[0.0, inf\], got -1.0"),
+        ("a2c.advantage=td", r"a2c.advantage.*'td'.*gae, recomputed"),
+    ):
+        with pytest.raises(ConfigError, match=message):
+            parse_settings([bad])
+
+
+def test_a_grid_keeps_one_set_of_settings_and_its_runs_train_with_them(tmp_path) -> None:
+    out = tmp_path / "g"
+    specs = grid.grid_specs(["overcooked"], ["transam"], [0])
+    settings = {"a2c.z_scale": 0.088, "model.dropout": 0.0}
+    assert grid.grid_settings(out) == {}  # no grid yet
+    grid.open_grid(out, "smoke", specs, ["transam"], settings=settings)
+    grid.open_grid(out, "smoke", specs, ["again"])  # an invocation without them keeps them
+    assert grid.grid_settings(out) == settings
+    config = grid.run_config(specs[0], grid.BUDGETS["smoke"], out, "default", settings)
+    assert (config.a2c.z_scale, config.model.dropout) == (0.088, 0.0)
+    assert grid.run_config(specs[0], grid.BUDGETS["smoke"], out).a2c.z_scale == 1.0
+    saved = (out / "grid.json").read_text()
+    with pytest.raises(ConfigError, match=r"settings a2c.z_scale=0.088 model.dropout=0.0; use"):
+        grid.open_grid(out, "smoke", specs, [], settings={"a2c.z_scale": 0.5})
+    assert (out / "grid.json").read_text() == saved

@@ -252,9 +252,13 @@ def test_reproduce_records_a_diverged_run_as_failed_and_goes_on(
     run_config = grid.run_config
 
     def diverging(
-        spec: grid.RunSpec, budget: grid.Budget, out: Any, partners: str = "default"
+        spec: grid.RunSpec,
+        budget: grid.Budget,
+        out: Any,
+        partners: str = "default",
+        settings: dict[str, Any] | None = None,
     ) -> TrainConfig:
-        cfg = run_config(spec, budget, out, partners)
+        cfg = run_config(spec, budget, out, partners, settings)
         return dataclasses.replace(
             cfg, partners="heuristic", a2c=dataclasses.replace(cfg.a2c, lr=1e4)
         )

@@ -236,3 +236,19 @@ def test_bad_grid_arguments_fail_before_writing(tmp_path: Path, capsys) -> None:
             ]
         )
     assert not out.exists()
+
+
+def test_a_grid_with_settings_trains_every_run_with_them_and_reports_them(tmp_path: Path) -> None:
+    """--set changes a setting in every run of a new grid (each run's config.json has it), a
+    later invocation without it keeps it, and the report says so."""
+    out = tmp_path / "scaled"
+    one = ["--budget", "smoke", "--out", str(out), "--jobs", "1", "--envs", "spread"]
+    one += ["--methods", "nam", "--seeds", "0"]
+    main(["reproduce", *one, "--set", "a2c.ent_coef=0.02", "a2c.hidden=64"])
+    config = json.loads((out / grid.RunSpec("spread", "nam", 0).rel / "config.json").read_text())
+    assert (config["a2c"]["ent_coef"], config["a2c"]["hidden"]) == (0.02, 64)
+    main(["reproduce", *one])  # resumes the grid as it was made: nothing to redo
+    assert grid.grid_settings(out) == {"a2c.ent_coef": 0.02, "a2c.hidden": 64}
+    results = json.loads((out / "report" / "results.json").read_text())
+    assert results["grid"]["settings"] == {"a2c.ent_coef": 0.02, "a2c.hidden": 64}
+    assert "**a2c.ent_coef=0.02**, **a2c.hidden=64**" in (out / "report" / "report.md").read_text()

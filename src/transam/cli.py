@@ -443,11 +443,16 @@ class Reproduce:
     final_episodes: int | None = None
     """episodes of each run's final evaluations (default: the budget's); recorded in the
     grid, and runs evaluated with another count are evaluated again"""
+    set: tuple[str, ...] = ()
+    """settings every run of the grid changes from the defaults, GROUP.NAME=VALUE with GROUP
+    a2c, model or baseline (e.g. --set a2c.z_scale=0.088 model.dropout=0): a deviation
+    measured as a whole grid; a new grid only, recorded in it (docs/reproducing.md)"""
 
     def run(self) -> None:
         from transam.compose import make_env, resolve_partners
         from transam.reproduce import grid
         from transam.reproduce.report.build import build_report
+        from transam.train.presets import parse_settings
 
         _check_positive(jobs=self.jobs)
         budget = grid.BUDGETS[self.budget]
@@ -471,13 +476,16 @@ class Reproduce:
             "eval_episodes": self.eval_episodes,
             "final_episodes": self.final_episodes,
         }
-        opened = grid.open_grid(out, self.budget, specs, ["transam", *_ARGV], partners, overrides)
+        settings = parse_settings(self.set)
+        opened = grid.open_grid(
+            out, self.budget, specs, ["transam", *_ARGV], partners, overrides, settings
+        )
         budget = grid.grid_budget(opened)
         console.print(
             f"{len(specs)} runs ({len(self.envs)} envs x {len(self.methods)} methods x "
             f"{len(seeds)} seeds), budget {self.budget!r} "
             f"({budget.total_steps:,} steps each), partners {partners!r}, into {out}/ via "
-            f"{self.backend}"
+            f"{self.backend}" + "".join(f", {k}={v}" for k, v in opened.get("settings", {}).items())
         )
         if self.backend == "ray":
             from transam.reproduce.grid_ray import run_ray

@@ -31,6 +31,7 @@ from typing import Any, Literal
 
 from transam import registry
 from transam.train.config import ConfigError, EvalConfig, TrainConfig
+from transam.train.presets import apply_settings
 
 BudgetName = Literal["smoke", "small", "medium", "paper"]
 
@@ -105,14 +106,19 @@ def grid_specs(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int]
 
 
 def run_config(
-    spec: RunSpec, budget: Budget, out: str | Path, partners: str = "default"
+    spec: RunSpec,
+    budget: Budget,
+    out: str | Path,
+    partners: str = "default",
+    settings: dict[str, Any] | None = None,
 ) -> TrainConfig:
-    """The training configuration of one grid run: the default settings plus the budget, against
-    the grid's partner population."""
+    """The training configuration of one grid run: the default settings with the grid's own
+    (``transam reproduce --set``), plus the budget, against the grid's partner population."""
+
     # the registry's episode length: a grid is planned without building environments
     episode_len = registry.env_entry(spec.env).episode_len
     every = max(1, round(budget.total_steps / (budget.evals * episode_len)))
-    return TrainConfig(
+    config = TrainConfig(
         env=spec.env,  # type: ignore[arg-type]
         method=spec.method,  # type: ignore[arg-type]
         partners=partners,
@@ -121,7 +127,8 @@ def run_config(
         out=str(Path(out) / spec.rel),
         progress=False,
         eval=EvalConfig(every_episodes=every, episodes=budget.eval_episodes),
-    ).validate()
+    )
+    return apply_settings(config, settings or {}).validate()
 
 
 def _log(out: Path, spec: RunSpec, event: dict[str, Any]) -> None:
@@ -156,7 +163,8 @@ def run_together(out: str | Path, specs: list[RunSpec], budget: Budget) -> list[
     from transam.train.loop import train, train_together
 
     out = Path(out)
-    configs = [run_config(spec, budget, out, grid_partners(out)) for spec in specs]
+    partners, settings = grid_partners(out), grid_settings(out)
+    configs = [run_config(spec, budget, out, partners, settings) for spec in specs]
     tic = time.time()
     todo = [
         (s, c)
@@ -275,6 +283,13 @@ def grid_partners(out: str | Path) -> str:
     return json.loads(path.read_text()).get("partners", "default") if path.exists() else "default"
 
 
+def grid_settings(out: str | Path) -> dict[str, Any]:
+    """The settings every run of a grid changes from the defaults (grid.json's ``settings``,
+    from ``transam reproduce --set``; none for a grid without the entry)."""
+    path = Path(out) / "grid.json"
+    return dict(json.loads(path.read_text()).get("settings", {})) if path.exists() else {}
+
+
 TRAINING_SETTINGS = ("total_steps", "evals", "eval_episodes")
 """The budget settings a new grid may change and an existing one keeps (its runs share them)."""
 OVERRIDABLE = (*TRAINING_SETTINGS, "final_episodes")
@@ -289,10 +304,13 @@ def open_grid(
     argv: list[str],
     partners: str = "default",
     overrides: dict[str, int | None] | None = None,
+    settings: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Create or extend ``grid.json``; a grid directory keeps one budget and one partner
+    """Create or extend ``grid.json``; a grid directory keeps one budget, one partner
     population (``partners``: a shipped choice, or a population directory as an absolute
-    path). ``overrides`` (None values ignored) replace budget settings of :data:`OVERRIDABLE`
+    path) and one set of ``settings`` (``group.name`` -> value, from ``transam reproduce
+    --set``: fixed when the grid is created; an invocation without them keeps the grid's).
+    ``overrides`` (None values ignored) replace budget settings of :data:`OVERRIDABLE`
     and stay recorded for later invocations: ``final_episodes`` at any time (runs evaluated at
     another count are evaluated again), the training settings only for a new grid (its runs
     must share them)."""
@@ -319,6 +337,12 @@ def open_grid(
                 f"--out {str(out)!r} holds a grid against partners "
                 f"{grid.get('partners', 'default')!r}; use another --out for partners {partners!r}"
             )
+        had_settings = grid.get("settings", {})
+        if settings and settings != had_settings:
+            raise ConfigError(
+                f"--out {str(out)!r} holds a grid with settings {_show(had_settings)}; use "
+                f"another --out for settings {_show(settings)}"
+            )
         for key in TRAINING_SETTINGS:
             had = grid["budget_settings"][key]
             if given.get(key, had) != had:
@@ -333,6 +357,7 @@ def open_grid(
             "budget": budget_name,
             "budget_settings": dataclasses.asdict(BUDGETS[budget_name]),
             "partners": partners,
+            "settings": dict(settings or {}),
             "runs": [],
             "invocations": [],
         }
@@ -345,6 +370,10 @@ def open_grid(
     out.mkdir(parents=True, exist_ok=True)
     write_json(path, grid)
     return grid
+
+
+def _show(settings: dict[str, Any]) -> str:
+    return " ".join(f"{k}={json.dumps(v)}" for k, v in settings.items()) or "(the defaults)"
 
 
 def grid_budget(grid: dict[str, Any]) -> Budget:

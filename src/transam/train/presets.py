@@ -201,9 +201,7 @@ def apply(config: TrainConfig, preset: str) -> TrainConfig:
         return config
     if preset not in PRESETS:
         raise ConfigError(f"unknown preset {preset!r}; valid choices: {', '.join(PRESET_NAMES)}")
-    for s in PRESETS[preset]:
-        config = _set(config, s.name, s.value)
-    return config
+    return apply_settings(config, {s.name: s.value for s in PRESETS[preset]})
 
 
 def _set(config: Any, name: str, value: Any) -> Any:
@@ -217,4 +215,55 @@ def get(config: Any, name: str) -> Any:
     """The value of setting ``name`` (``group.name``) in ``config``."""
     for part in name.split("."):
         config = getattr(config, part)
+    return config
+
+
+SETTING_GROUPS = ("a2c", "model", "baseline")
+"""The groups a grid may set (``transam reproduce --set``): the method and its training; the
+run's identity (env, method, seed, partners, length, evaluation) is the grid's own."""
+
+
+def parse_settings(assignments: tuple[str, ...] | list[str]) -> dict[str, Any]:
+    """``("a2c.z_scale=0.088", ...)`` -> ``{"a2c.z_scale": 0.088}``, each value read as JSON
+    (``true``, ``3``, ``0.1``, ``null``; anything else a string) and checked against the
+    setting's type; :class:`ConfigError` names a bad one and the valid choices."""
+    import json
+
+    defaults = TrainConfig()
+    settings: dict[str, Any] = {}
+    for item in assignments:
+        name, eq, text = item.partition("=")
+        name = name.strip().replace("-", "_")
+        group, _, field_name = name.partition(".")
+        if not eq or group not in SETTING_GROUPS or not field_name:
+            raise ConfigError(
+                f"bad setting {item!r}: write GROUP.NAME=VALUE with GROUP one of "
+                f"{', '.join(SETTING_GROUPS)} (e.g. a2c.z_scale=0.088)"
+            )
+        fields = [f.name for f in dataclasses.fields(getattr(defaults, group))]
+        if field_name not in fields:
+            raise ConfigError(
+                f"unknown setting {name!r}; valid {group} settings: {', '.join(fields)}"
+            )
+        try:
+            value = json.loads(text)
+        except json.JSONDecodeError:
+            value = text
+        current = get(defaults, name)
+        if isinstance(current, float) and type(value) is int:
+            value = float(value)
+        if current is not None and type(value) is not type(current):
+            raise ConfigError(
+                f"setting {name!r} takes a {type(current).__name__} (default {current!r}), "
+                f"got {text!r}"
+            )
+        settings[name] = value
+    apply_settings(defaults, settings).validate()  # a bad value fails before anything is written
+    return settings
+
+
+def apply_settings(config: TrainConfig, settings: dict[str, Any]) -> TrainConfig:
+    """``config`` with each setting (``group.name`` -> value) replaced."""
+    for name, value in settings.items():
+        config = _set(config, name, value)
     return config

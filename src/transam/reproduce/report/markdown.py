@@ -5,6 +5,7 @@ number comes from results.json.
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 from transam.registry import display
@@ -263,7 +264,12 @@ def render(results: dict[str, Any], table: Table) -> str:
         "",
         f"Budget **{grid['budget']}**, partners **{grid.get('partners', 'default')}** (the "
         "population every run trained against; `heldout` evaluations are the shipped held-out "
-        "population):",
+        "population), settings "
+        + (
+            ", ".join(f"**{k}={json.dumps(v)}**" for k, v in grid.get("settings", {}).items())
+            or "**the defaults**"
+        )
+        + " (`transam reproduce --set`: what every run changes from the defaults):",
         "",
         *_md_table(
             ["setting", "value"],

@@ -207,6 +207,7 @@ def build_results(
             "budget": grid.info.get("budget", "unknown"),
             "budget_settings": grid.info.get("budget_settings", {}),
             "partners": grid.info.get("partners", "default"),
+            "settings": grid.info.get("settings", {}),
         },
         "compute": compute_summary(grid),
         "runs": runs_summary(grid),
