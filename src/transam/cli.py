@@ -485,7 +485,7 @@ class Reproduce:
             f"{len(specs)} runs ({len(self.envs)} envs x {len(self.methods)} methods x "
             f"{len(seeds)} seeds), budget {self.budget!r} "
             f"({budget.total_steps:,} steps each), partners {partners!r}, into {out}/ via "
-            f"{self.backend}" + "".join(f", {k}={v}" for k, v in opened.get("settings", {}).items())
+            f"{self.backend}, settings {grid.show_settings(opened.get('settings', {}))}"
         )
         if self.backend == "ray":
             from transam.reproduce.grid_ray import run_ray

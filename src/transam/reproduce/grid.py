@@ -276,18 +276,22 @@ def machine() -> dict[str, Any]:
     }
 
 
+def _recorded(out: str | Path, key: str, default: Any) -> Any:
+    """grid.json's entry ``key``; ``default`` for a grid without the entry or without grid.json."""
+    path = Path(out) / "grid.json"
+    return json.loads(path.read_text()).get(key, default) if path.exists() else default
+
+
 def grid_partners(out: str | Path) -> str:
     """The partner population a grid trains against (grid.json's ``partners``; "default" for a
     grid without the entry or without grid.json)."""
-    path = Path(out) / "grid.json"
-    return json.loads(path.read_text()).get("partners", "default") if path.exists() else "default"
+    return str(_recorded(out, "partners", "default"))
 
 
 def grid_settings(out: str | Path) -> dict[str, Any]:
     """The settings every run of a grid changes from the defaults (grid.json's ``settings``,
     from ``transam reproduce --set``; none for a grid without the entry)."""
-    path = Path(out) / "grid.json"
-    return dict(json.loads(path.read_text()).get("settings", {})) if path.exists() else {}
+    return dict(_recorded(out, "settings", {}))
 
 
 TRAINING_SETTINGS = ("total_steps", "evals", "eval_episodes")
@@ -340,8 +344,8 @@ def open_grid(
         had_settings = grid.get("settings", {})
         if settings and settings != had_settings:
             raise ConfigError(
-                f"--out {str(out)!r} holds a grid with settings {_show(had_settings)}; use "
-                f"another --out for settings {_show(settings)}"
+                f"--out {str(out)!r} holds a grid with settings {show_settings(had_settings)}; use "
+                f"another --out for settings {show_settings(settings)}"
             )
         for key in TRAINING_SETTINGS:
             had = grid["budget_settings"][key]
@@ -372,7 +376,8 @@ def open_grid(
     return grid
 
 
-def _show(settings: dict[str, Any]) -> str:
+def show_settings(settings: dict[str, Any]) -> str:
+    """``a2c.z_scale=0.088 model.dropout=0.0``: settings as ``--set`` takes them."""
     return " ".join(f"{k}={json.dumps(v)}" for k, v in settings.items()) or "(the defaults)"
 
 
