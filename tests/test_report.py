@@ -378,6 +378,10 @@ def test_claims_fail_when_transam_is_worse(tmp_path: Path) -> None:
     assert v["ablation-pool"] == "not run"  # no ablation in this grid
     check = results["claims"][0]["per_env"]["spread"]["checks"][0]
     assert check["diff"] < 0 and check["ci"][1] < 0 and check["n_a"] == 2
+    # the runs' seeds (--seeds 0 1), not the budget's default count (3), say how it was run
+    md = (tmp_path / "report" / "report.md").read_text()
+    assert results["grid"]["seeds"] == [0, 1]
+    assert "| seeds | 0, 1 |" in md and "| seeds | 3 |" not in md
 
 
 def test_tied_methods_are_inconclusive_and_one_seed_never_decides(tmp_path: Path) -> None:

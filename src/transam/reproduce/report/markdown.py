@@ -276,7 +276,9 @@ def render(results: dict[str, Any], table: Table) -> str:
             [
                 [k, f"{v:,}" if isinstance(v, int) else str(v)]
                 for k, v in grid["budget_settings"].items()
-            ],
+                if k != "seeds"  # the count without --seeds; the runs' own seeds follow
+            ]
+            + [["seeds", ", ".join(map(str, grid.get("seeds", []))) or "none"]],
         ),
         "",
         "Commands (one per invocation, from grid.json):",

@@ -48,6 +48,12 @@ FIGURES = {
 """The report's figures: key -> file name under report/figures/."""
 
 
+def grid_seeds(grid: Grid) -> list[int]:
+    """The seeds grid.json's runs name (``runs/ENV/METHOD/seed_S``): what ``--seeds`` gave,
+    where the budget's ``seeds`` is only the count used without it."""
+    return sorted({int(rel.rsplit("seed_", 1)[1]) for rel in grid.expected if "seed_" in rel})
+
+
 def usual_seeds(table: Table) -> int | None:
     ns = [
         c["metrics"]["return"]["n"]
@@ -206,6 +212,7 @@ def build_results(
             "out": str(grid.out),
             "budget": grid.info.get("budget", "unknown"),
             "budget_settings": grid.info.get("budget_settings", {}),
+            "seeds": grid_seeds(grid),
             "partners": grid.info.get("partners", "default"),
             "settings": grid.info.get("settings", {}),
         },
