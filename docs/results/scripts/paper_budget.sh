@@ -41,3 +41,20 @@ if [[ -z "${ARCHIVE_ONLY:-}" ]]; then
     --partners "$POP" --out "$OUT" --jobs "${JOBS:-1}" --final-episodes 500
 fi
 "$BIN/python" docs/results/scripts/archive_grid.py --carry "$OUT" "$ARCHIVE"
+
+# Then the same-episodes test (docs/results/paper-budget/README.md): TransAM's and LIAM's
+# models scored on each other's episodes. It needs both 10M checkpoints on one machine and
+# the archives keep none, so it runs where TransAM's last seed finished (its checkpoints are
+# still in runs/), beside a LIAM seed 0 retrained for it (about 30 minutes alone).
+LAST=$OUT/runs/spread/transam/seed_2
+LIAM_OUT=${LIAM_OUT:-runs/liam-same-episodes}
+SAME=docs/results/paper-budget/same-episodes.json
+if [[ -z "${ARCHIVE_ONLY:-}" && -f $LAST/final.json && -d $LAST/checkpoints && ! -f $SAME ]]; then
+  "$BIN/transam" reproduce --budget paper --envs spread --methods liam --seeds 0 \
+    --partners "$POP" --out "$LIAM_OUT" --jobs 1 --final-episodes 500
+  "$BIN/python" docs/results/scripts/archive_grid.py --carry "$LIAM_OUT" \
+    docs/results/paper-budget/liam-same-episodes
+  "$BIN/python" docs/results/scripts/same_episodes.py "$LAST" \
+    "$LIAM_OUT/runs/spread/liam/seed_0" --episodes 500 --out runs/same-episodes.json
+  cp runs/same-episodes.json "$SAME"
+fi
