@@ -7,7 +7,7 @@ prints, per environment, the mean |o_t| and, for TransAM and LIAM at initialisat
 |z_t|, the per-feature standard deviation of z over an episode's steps and its largest entry,
 on one random-play episode per partner team of the default population (seconds on a CPU).
 
-    python docs/results/scripts/embedding_size.py overcooked spread tag lbf
+    python docs/results/scripts/embedding_size.py overcooked spread tag lbf [--methods carl cail pel]
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("envs", nargs="+")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--methods", nargs="+", default=["transam", "liam"])
     args = parser.parse_args()
     print(
         "| environment | obs dim | mean abs(o) | model | mean abs(z) | z std, steps | max abs z |"
@@ -35,7 +36,7 @@ def main() -> None:
         env = make_env(name)
         xs, _ = collect(env, 1, args.seed)  # [teams, episode_len]
         obs_norm = float(jnp.linalg.norm(xs.obs, axis=-1).mean())
-        for method in ("transam", "liam"):
+        for method in args.methods:
             model = make_model(method, env.spec)
             params = model.init(jax.random.key(args.seed + 1), env.spec)
             embed = functools.partial(model.embed_rollout, params, model.init_carry(env.spec))
