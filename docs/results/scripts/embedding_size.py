@@ -7,7 +7,8 @@ prints, per environment, the mean |o_t| and, for TransAM and LIAM at initialisat
 |z_t|, the per-feature standard deviation of z over an episode's steps and its largest entry,
 on one random-play episode per partner team of the default population (seconds on a CPU).
 
-    python docs/results/scripts/embedding_size.py overcooked spread tag lbf [--methods carl cail pel]
+    python docs/results/scripts/embedding_size.py overcooked spread tag lbf \
+        [--methods carl cail pel]
 """
 
 from __future__ import annotations
