@@ -3,9 +3,10 @@
 The policy reads concat(o_t, z_t). TransAM's encoder is post-norm, so z is a LayerNorm output:
 |z| = sqrt(width) (11.3 at width 128) whatever the window, and at initialisation it changes
 from step to step by about one unit per feature. LIAM's z is an LSTM encoder's, about 1. This
-prints, per environment, the mean |o_t| and, for TransAM and LIAM at initialisation, the mean
-|z_t|, the per-feature standard deviation of z over an episode's steps and its largest entry,
-on one random-play episode per partner team of the default population (seconds on a CPU).
+prints, per environment, the mean |o_t| and, for each model of --methods (TransAM and LIAM
+unless told) at initialisation, the mean |z_t|, the per-feature standard deviation of z over
+an episode's steps and its largest entry, on one random-play episode per partner team of the
+default population (seconds on a CPU).
 
     python docs/results/scripts/embedding_size.py overcooked spread tag lbf \
         [--methods carl cail pel]
