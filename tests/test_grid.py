@@ -23,6 +23,18 @@ def test_episode_lengths_match_the_environments(name: str) -> None:
     )
 
 
+def test_the_machine_record_names_the_cpu_a_masked_model_name_hides() -> None:
+    two = "processor\t: 0\nmodel name\t: Intel(R) Xeon(R) Processor\ncpu family\t: 6\n"
+    two += "model\t\t: 167\nstepping\t: 1\nflags\t\t: fpu avx2 fma avx512f amx_tile\n\n"
+    two += "processor\t: 1\nmodel name\t: other\nflags\t\t: sse\n"
+    assert grid.cpu_description(two) == {
+        "cpu": "Intel(R) Xeon(R) Processor (family/model/stepping 6/167/1)",
+        "cpu_isa": ["avx2", "fma", "avx512f", "amx_tile"],
+    }
+    assert grid.cpu_description("") == {}
+    assert grid.machine()["cpus"] == os.cpu_count()
+
+
 @pytest.mark.parametrize("budget", list(grid.BUDGETS))
 @pytest.mark.parametrize("name", registry.PAPER_ENVS)
 def test_run_config_evaluates_about_budget_evals_times(budget: str, name: str) -> None:

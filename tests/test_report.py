@@ -76,6 +76,8 @@ def write_grid(
                     "host": "box",
                     "platform": "Linux",
                     "cpus": 2,
+                    "cpu": "Xeon (family/model/stepping 6/167/1)",
+                    "cpu_isa": ["avx2", "avx512f"],
                     "jax_backend": "cpu",
                     "devices": ["TFRT_CPU_0"],
                 },
@@ -321,6 +323,7 @@ def test_full_grid_writes_every_artefact(good: tuple[Path, dict[str, Any], str])
     # the command, budget, compute and CI method are stated
     assert "transam reproduce --budget smoke" in md and "total_steps" in md
     assert "0:15:00" in md and "percentile bootstrap" in md and "10,000" in md
+    assert "Xeon (family/model/stepping 6/167/1); ISA avx2 avx512f" in md  # the CPU, named
     assert "rliable" in md and "crude" in md
     # marl-eval's raw data layout
     me = json.loads((report / "marl_eval.json").read_text())

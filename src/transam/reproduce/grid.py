@@ -263,14 +263,48 @@ def archive_grid(out: str | Path, dest: str | Path, carry: bool = False) -> list
 # ---------------------------------------------------------------- the grid file
 
 
+# The instruction sets XLA's CPU code generation chooses kernels by: two machines with the
+# same kernel label but different sets can give runs that differ in the last bits.
+_ISA_FLAGS = ("avx2", "fma", "avx512f", "avx512_bf16", "avx512_fp16", "avx_vnni", "amx_tile")
+
+
+def cpu_description(cpuinfo: str) -> dict[str, Any]:
+    """The CPU of a ``/proc/cpuinfo`` text: model name, family/model/stepping, ISA flags.
+
+    A hypervisor often masks the model name ("Intel(R) Xeon(R) Processor"); the numbers
+    and the flags still tell machines apart.
+    """
+    first: dict[str, str] = {}
+    for line in cpuinfo.splitlines():
+        if not line.strip():
+            if first:
+                break  # the first processor's block is enough
+            continue
+        key, _, value = line.partition(":")
+        first[key.strip()] = value.strip()
+    if not first:
+        return {}
+    flags = set(first.get("flags", "").split())
+    ident = "/".join(first.get(k, "?") for k in ("cpu family", "model", "stepping"))
+    return {
+        "cpu": f"{first.get('model name', '?')} (family/model/stepping {ident})",
+        "cpu_isa": [f for f in _ISA_FLAGS if f in flags],
+    }
+
+
 def machine() -> dict[str, Any]:
     """What ran the grid (for the report's compute line)."""
     import jax
 
+    try:
+        cpu = cpu_description(Path("/proc/cpuinfo").read_text())
+    except OSError:  # not Linux
+        cpu = {"cpu": platform.processor() or "?"}
     return {
         "host": socket.gethostname(),
         "platform": platform.platform(),
         "cpus": os.cpu_count(),
+        **cpu,
         "jax_backend": jax.default_backend(),
         "devices": [str(d) for d in jax.devices()],
     }

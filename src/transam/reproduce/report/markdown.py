@@ -304,6 +304,8 @@ def render(results: dict[str, Any], table: Table) -> str:
         parts = [
             str(m["platform"]) if m.get("platform") else "",
             f"{m['cpus']} CPUs" if m.get("cpus") else "",
+            str(m["cpu"]) if m.get("cpu") else "",
+            "ISA " + " ".join(m["cpu_isa"]) if m.get("cpu_isa") else "",
             f"JAX backend {m['jax_backend']}" if m.get("jax_backend") else "",
             "devices " + ", ".join(map(str, m["devices"])) if m.get("devices") else "",
         ]
