@@ -30,6 +30,7 @@ from transam.envs.core import ControlledEnv
 from transam.evaluation.weights import restore_weights
 from transam.models.base import AgentModel, LocalStep, Params
 from transam.rundir import load_run_config
+from transam.train.config import ConfigError
 from transam.train.programs import env_and_model
 
 
@@ -40,6 +41,8 @@ def main() -> None:
     parser.add_argument("--methods", nargs="+", default=["transam", "liam"])
     parser.add_argument("--runs", nargs="+", default=[], help="trained run directories")
     args = parser.parse_args()
+    if not args.envs and not args.runs:
+        parser.error("name environments (e.g. overcooked spread) or --runs RUN_DIR ...")
     print(
         "| environment | obs dim | mean abs(o) | model | mean abs(z) | z std, steps | max abs z |"
     )
@@ -52,9 +55,12 @@ def main() -> None:
             params = model.init(jax.random.key(args.seed + 1), env.spec)
             _row(name, env, xs, method, model, params)
     for run in args.runs:
-        config = load_run_config(run)
-        env, model = env_and_model(config)
-        weights = restore_weights(config, Path(run), None, [])
+        try:
+            config = load_run_config(run)
+            env, model = env_and_model(config)
+            weights = restore_weights(config, Path(run), None, [])
+        except ConfigError as err:  # no run there, or no checkpoint that verifies
+            parser.error(str(err))
         xs, _ = collect(env, 1, args.seed)
         _row(
             config.env,
