@@ -332,7 +332,11 @@ def test_nam_has_no_decoder_metrics_and_no_probe(smoke_grid: Path, tmp_path: Pat
     for key in ("action_accuracy_newest", "action_accuracy_all_positions", "obs_mse", "probe"):
         assert key not in res
     assert "pca" not in res
-    assert set(res["per_step"]) == {"cum_return", "policy_entropy"} and res["step"] == 1000
+    assert set(res["per_step"]) == {"cum_return", "policy_entropy", "obs_norm", "z_norm"}
+    assert res["step"] == 1000
+    # NAM's z is its previous action, one-hot: |z| 0 at the first step, 1 after.
+    assert res["per_step"]["z_norm"][0] == 0.0
+    np.testing.assert_allclose(res["per_step"]["z_norm"][1:], 1.0, rtol=1e-6)
     assert any("no learned embedding" in note for note in res["notes"])
     assert not (run / "eval_train_pca.npz").exists()
     assert (run / "eval_train.png").exists()

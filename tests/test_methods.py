@@ -259,6 +259,7 @@ def test_tiny_run_writes_the_keys_and_resume_is_exact(method: str, tmp_path: Pat
         assert np.isfinite(rec["eval/return"]) and np.isfinite(rec["train/policy_loss"])
         assert ("eval/action_accuracy_newest" in rec) == (method != "oracle")
         assert ("eval/obs_mse" in rec) == (method in ("transam", "liam", STREAM))
+        assert rec["eval/obs_norm"] > 0 and rec["eval/z_norm"] > 0  # the policy's input sizes
     # Kill after one chunk (its checkpoint written), resume: identical metrics. The cut run
     # starts afresh with the same seed, so this also shows the run is deterministic (and, for
     # the streaming model, that its key/value cache is checkpointed with the runner state).

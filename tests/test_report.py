@@ -54,9 +54,11 @@ def write_grid(
     unfinished: Iterable[str] = (),
     unevaluated: Iterable[str] = (),
     noise: float = 0.2,
+    sizes: bool = True,
 ) -> None:
     """A grid directory as `transam reproduce` + `transam evaluate` would leave it: method m
-    scores BASE[env] + ret[m] (+ noise) and action accuracy acc[m]. Runs named in ``absent``
+    scores BASE[env] + ret[m] (+ noise) and action accuracy acc[m]; ``sizes``: its evaluations
+    record the policy's input sizes (older ones do not). Runs named in ``absent``
     are listed in grid.json but have no directory; ``unfinished`` ones have no final.json;
     ``unevaluated`` ones have no eval_*.json."""
     rng = np.random.default_rng(0)
@@ -130,6 +132,10 @@ def write_grid(
                 "per_partner_return": {"a": r},
                 "per_step": {"cum_return": list(np.linspace(0, r, EPISODE))},
             }
+            if sizes:  # not from rng: the returns' noise stays the older grids'
+                k = 0.1 * int(seed.removeprefix("seed_"))
+                ev["obs_norm"] = 5.0 + k
+                ev["z_norm"] = (11.3 if method.startswith("transam") else 1.0) + k
             if method in ACTIONS:
                 a = acc.get(method, 0.5) + 0.01 * rng.normal()
                 ev[acc_key] = a
@@ -424,6 +430,7 @@ def test_partial_grid_reports_what_exists_and_lists_what_is_missing(tmp_path: Pa
         absent={"runs/spread/transam-pool/seed_1"},
         unfinished={"runs/spread/transam/seed_1"},
         unevaluated={"runs/spread/nam/seed_1"},
+        sizes=False,
     )
     (tmp_path / "runs/spread/nam/seed_0/eval_heldout.json").write_text("{torn")
     grid = json.loads((tmp_path / "grid.json").read_text())  # one run failed, one failed then
@@ -451,6 +458,7 @@ def test_partial_grid_reports_what_exists_and_lists_what_is_missing(tmp_path: Pa
     assert nam["source"] == "mixed" and nam["n"] == 2  # seed 1 from final.json
     assert "†" in md and "not run" in md
     assert "action_accuracy_newest" not in cells["nam"]["metrics"]
+    assert "Sizes of the policy's inputs" not in md  # evaluations older than the record
     v = _verdicts(results)
     assert v["returns-highest"] == "inconclusive"  # TransAM has one finished seed
     assert v["accuracy-mixed-under"] == "not run"  # no LBF
@@ -525,6 +533,7 @@ def test_report_tables_match_results_json(good: tuple[Path, dict[str, Any], str]
         ("### Action reconstruction", "action_accuracy_newest"),
         ("### Observation reconstruction", "obs_mse"),
         ("### Partner-identity probe", "probe_accuracy"),
+        ("### Sizes of the policy's inputs", "z_norm"),
     ):
         body = md.split(section, 1)[1].split("\n### ", 1)[0]
         header = next(ln for ln in body.splitlines() if ln.startswith("| method |"))
@@ -541,7 +550,7 @@ def test_report_tables_match_results_json(good: tuple[Path, dict[str, Any], str]
                 s = results["cells"][env][method]["metrics"][metric]
                 assert text == fmt_stat(metric, s, usual), (env, method, metric)
                 checked += 1
-    assert checked == 4 * (10 + 7 + 4 + 9)
+    assert checked == 4 * (10 + 7 + 4 + 9 + 10)
     # the ablation table has the four variants' returns
     ablation = md.split("### Spread ablation", 1)[1].split("\n### ", 1)[0]
     for m in ("transam", "transam-pool", "transam-fuse", "transam-im"):

@@ -412,6 +412,31 @@ def test_final_evaluation_scores_every_window_position(env: ControlledEnv) -> No
     assert ACC_ALL not in got["pool"].scores and ACC_NEWEST in got["pool"].scores
 
 
+def test_evaluation_records_the_sizes_of_the_policys_inputs(env: ControlledEnv) -> None:
+    """``z_norm`` is |z_scale * z_t|: a post-norm TransAM's z is a LayerNorm output, so at
+    initialisation |z| = sqrt(width) at every step, and a2c.z_scale scales it exactly (the
+    first step's z does not depend on the policy); ``obs_norm`` is |o_t|, the same for both."""
+    from transam.train.a2c import init_runner
+    from transam.train.episodes import OBS_NORM, Z_NORM, make_episodes
+
+    model = TransAM(env.spec, dataclasses.replace(TINY, layers=1))
+    got = {}
+    for scale in (1.0, 0.25):
+        cfg = TrainConfig(
+            env="spread", method="transam", a2c=A2CConfig(act_dropout=False, z_scale=scale)
+        )
+        rs = init_runner(cfg, env, model, jax.random.key(0))
+        run = jax.jit(make_episodes(cfg, env, model, 4))
+        got[scale] = jax.device_get(run(rs.policy_params, rs.model_params, jax.random.key(1), None))
+    full, scaled = got[1.0], got[0.25]
+    live = np.asarray(full.live) > 0
+    width = model.embed_dim
+    np.testing.assert_allclose(np.asarray(full.scores[Z_NORM])[live], np.sqrt(width), rtol=1e-3)
+    np.testing.assert_allclose(scaled.scores[Z_NORM][0], 0.25 * full.scores[Z_NORM][0], rtol=1e-5)
+    np.testing.assert_allclose(scaled.scores[OBS_NORM][0], full.scores[OBS_NORM][0], rtol=1e-6)
+    assert float(np.asarray(full.scores[OBS_NORM])[live].min()) > 0.0
+
+
 def test_default_size_and_finite_loss(env: ControlledEnv, traj: Any) -> None:
     xs, rec = traj
     model = make_model("transam", env.spec)

@@ -38,9 +38,10 @@ relative to the run directory: the named one, or the newest that verifies, any n
 does not being named in ``notes``), ``step``, ``episodes``, ``greedy``, ``act_dropout``
 (whether the agent model acted with its dropout), ``return`` {mean, std},
 the :data:`EVAL_METRICS` the model predicts, ``policy_entropy`` (the policy's mean entropy
-per step, nats), ``action_frequency`` [A] (the share of each of the controlled agent's actions
-over the episodes' steps; on the MPE games action 0 is "no move"), ``per_partner_return``
-{team: mean},
+per step, nats), ``obs_norm`` and ``z_norm`` (the mean sizes of the policy's two inputs,
+|o_t| and |z_scale * z_t|: :data:`transam.train.episodes.Z_NORM`), ``action_frequency``
+[A] (the share of each of the controlled agent's actions over the episodes' steps; on the
+MPE games action 0 is "no move"), ``per_partner_return`` {team: mean},
 ``per_step`` {cum_return, and a curve per metric present, policy_entropy included},
 ``probe`` {accuracy, per_step, chance, train_episodes, test_episodes, features, ridge} and
 ``pca`` {explained_variance} (both absent without an embedding), ``notes`` [str].
@@ -77,7 +78,7 @@ from transam.rundir import (
     write_json,
 )
 from transam.train.config import ConfigError, TrainConfig
-from transam.train.episodes import POLICY_ENTROPY
+from transam.train.episodes import INPUT_SIZES, POLICY_ENTROPY
 
 EVAL_METRICS = (ACC_NEWEST, ACC_ALL, "obs_mse", MSE_ALL)
 """The agent-modeling metrics an evaluation may hold (older files: ``action_accuracy``, the
@@ -224,7 +225,7 @@ def evaluate_starts(
                 int(g): float(returns[st.group == g].mean()) for g in np.unique(st.group)
             },
         }
-        for key in (*EVAL_METRICS, POLICY_ENTROPY):
+        for key in (*EVAL_METRICS, POLICY_ENTROPY, *INPUT_SIZES):
             if key in ep.scores:
                 res[key] = float(np.asarray(ep.scores[key], np.float64).sum() / live.sum())
         res["returns"] = [float(r) for r in returns]
@@ -379,7 +380,7 @@ def _evaluate_locked(
         "returns": [float(r) for r in returns],  # per episode, to pair with other players
     }
     per_step: dict[str, Any] = {"cum_return": [float(v) for v in reward.cumsum(0).mean(1)]}
-    for key in (*EVAL_METRICS, POLICY_ENTROPY):
+    for key in (*EVAL_METRICS, POLICY_ENTROPY, *INPUT_SIZES):
         if key in ep.scores:
             score = np.asarray(ep.scores[key], np.float64)
             out[key] = float(score.sum() / live.sum())

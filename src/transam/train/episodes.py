@@ -55,6 +55,13 @@ POLICY_ENTROPY = "policy_entropy"
 """The per-step score of the policy's own entropy (nats; every method has it): where in the
 episode the policy is decided and where it is near uniform."""
 
+OBS_NORM, Z_NORM = "obs_norm", "z_norm"
+"""The per-step sizes of the policy's two inputs, concat(o_t, z_scale * z_t): |o_t| and
+|z_scale * z_t| (Euclidean; NAM's z is its previous action, one-hot). An embedding far
+larger than the observation drowns it in the policy's first layer (TransAM's LayerNorm z is
+sqrt(width) = 11.3; CARL's contrastive z grows as it trains): docs/results/overcooked."""
+INPUT_SIZES = (OBS_NORM, Z_NORM)
+
 EvalFn = Callable[[Any, Any, jax.Array], dict[str, jax.Array]]
 
 
@@ -89,6 +96,7 @@ def make_episodes(
     k = window.config.context if window is not None else 1
     spec = env.spec
     dropout = config.acting_dropout
+    z_scale = config.a2c.z_scale
 
     def episodes(
         policy_params: Any,
@@ -131,7 +139,11 @@ def make_episodes(
                 action = jax.random.categorical(k_act, logits).astype(jnp.int32)
             env_state, ts, x = env_step(env, k_env, env_state, action)
             live = alive.astype(jnp.float32)
-            scores = {POLICY_ENTROPY: policy_entropy(logits) * live}
+            scores = {
+                POLICY_ENTROPY: policy_entropy(logits) * live,
+                OBS_NORM: jnp.linalg.norm(x.obs, axis=-1) * live,
+                Z_NORM: jnp.linalg.norm(z_scale * z, axis=-1) * live,
+            }
             rec = ts.record
             obs_pred, act_logits = jax.vmap(model.decode, in_axes=(None, 0, 0))(
                 model_params, z, rec.other_obs

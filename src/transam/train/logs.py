@@ -19,7 +19,7 @@ import numpy as np
 from transam.models.base import ACC_NEWEST
 from transam.train.a2c import anneal_updates
 from transam.train.config import TrainConfig
-from transam.train.episodes import POLICY_ENTROPY
+from transam.train.episodes import INPUT_SIZES, POLICY_ENTROPY
 from transam.train.programs import Plan
 
 
@@ -53,7 +53,7 @@ def make_record(
     for k, v in sorted(train.items()):
         if k not in ("episodes", "return_sum"):
             rec[f"train/{k.removeprefix('model/')}"] = _clean_float(v)
-    for k in ("return", "return_std", ACC_NEWEST, "obs_mse", POLICY_ENTROPY):
+    for k in ("return", "return_std", ACC_NEWEST, "obs_mse", POLICY_ENTROPY, *INPUT_SIZES):
         if k in evaluation:  # a method without a decoder has no accuracy / MSE: absent, not 0
             rec[f"eval/{k}"] = _clean_float(evaluation[k])
     return rec

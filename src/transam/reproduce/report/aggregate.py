@@ -12,7 +12,15 @@ from transam.reproduce.report.load import ENV_ORDER, METHOD_ORDER, Grid, RunData
 from transam.reproduce.report.stats import curve_ci, interval, stratified_bootstrap
 
 ACC_NEWEST, ACC_ALL = "action_accuracy_newest", "action_accuracy_all_positions"
-EVAL_METRICS = ("return", ACC_NEWEST, ACC_ALL, "obs_mse", "obs_mse_all_positions")
+EVAL_METRICS = (
+    "return",
+    ACC_NEWEST,
+    ACC_ALL,
+    "obs_mse",
+    "obs_mse_all_positions",
+    "obs_norm",
+    "z_norm",
+)
 """Final metrics read from the final evaluation (a metric a method lacks is absent)."""
 FINAL_METRICS = (
     *EVAL_METRICS,

@@ -21,6 +21,8 @@ METRIC_TITLE = {
     ACC_ALL: "action accuracy, all window positions (%)",
     "probe_accuracy": "probe accuracy (%)",
     "obs_mse": "observation MSE",
+    "z_norm": "embedding size |z_scale · z_t| in the policy's input",
+    "obs_norm": "observation size |o_t|",
 }
 PERCENT = (ACC_NEWEST, ACC_ALL, "probe_accuracy", f"trend:{ACC_NEWEST}", "trend:accuracy_gain")
 ACCURACY_NOTE = (
@@ -177,6 +179,29 @@ def _levels_md(table: Table, levels: dict[str, dict[str, Any] | None]) -> list[s
 
 
 # ---------------------------------------------------------------- sections
+
+
+def _input_sizes_md(table: Table, usual_n: int | None) -> list[str]:
+    """|z_scale * z_t| and |o_t|, the policy's two inputs (final evaluation), where recorded:
+    an embedding far larger than the observation drowns it in the policy's first layer."""
+    if not _methods_with(table, "z_norm"):
+        return []  # evaluations older than the record
+    return [
+        "### Sizes of the policy's inputs",
+        "",
+        "Mean Euclidean size over the episodes' steps of the embedding as the policy reads it, "
+        "|z_scale · z_t| (NAM's z is its previous action, one-hot), and of the observation "
+        "|o_t|; the policy's input is their concatenation.",
+        "",
+        "Embedding, |z_scale · z_t|:",
+        "",
+        *metric_table(table, "z_norm", usual_n),
+        "",
+        "Observation, |o_t|:",
+        "",
+        *metric_table(table, "obs_norm", usual_n),
+        "",
+    ]
 
 
 def _hms(seconds: float) -> str:
@@ -383,6 +408,7 @@ def render(results: dict[str, Any], table: Table) -> str:
         "",
         *metric_table(table, "obs_mse", usual_n),
         "",
+        *_input_sizes_md(table, usual_n),
         "### Spread ablation (paper Table 1)",
         "",
     ]
