@@ -42,14 +42,12 @@ def main() -> None:
         title: json.loads((ROOT / folder / "grid" / "report" / "results.json").read_text())
         for title, (folder, _) in GRIDS.items()
     }
+    by_key = {t: {c["key"]: c for c in r["claims"]} for t, r in reports.items()}
     claims = next(iter(reports.values()))["claims"]
     print("| claim | " + " | ".join(GRIDS) + " |")
     print("|---|" + "---|" * len(GRIDS))
     for claim in claims:
-        row = []
-        for title, (_, env) in GRIDS.items():
-            theirs = {c["key"]: c for c in reports[title]["claims"]}
-            row.append(cell(theirs[claim["key"]], env))
+        row = [cell(by_key[t][claim["key"]], env) for t, (_, env) in GRIDS.items()]
         print(f"| `{claim['key']}` ({claim['where']}) | " + " | ".join(row) + " |")
     dates = ", ".join(f"{t}: {r['generated']}" for t, r in reports.items())
     print(f"\nreports generated {dates}")
