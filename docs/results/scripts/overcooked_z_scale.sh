@@ -20,40 +20,10 @@ source docs/results/scripts/background.sh
 BIN=${BIN:-.venv/bin}
 ARCHIVE=${ARCHIVE:-docs/results/overcooked/z-scale}
 SEEDS=${SEEDS-0 1 2}  # SEEDS="" for the no-act-dropout run alone
+PREFIX=oc
 COMMON=(--env overcooked --total-steps 1500000 --eval.every-episodes 150
   --eval.episodes 100)
-
-keep() {  # NAME SEED: the run into the archive; an unfinished one with its newest checkpoint
-  local out=runs/oc-$1-s$2 kept=$ARCHIVE/$1/seed_$2
-  [[ -f "$out/config.json" ]] || return 0
-  rm -rf "$kept" && mkdir -p "$kept"
-  for f in config.json partners.json metrics.jsonl final.json eval_train.json eval_heldout.json; do
-    [[ -f "$out/$f" ]] && cp "$out/$f" "$kept/"
-  done
-  if [[ ! -f "$out/eval_heldout.json" ]]; then
-    local newest
-    newest=$(find "$out/checkpoints" -name 'chunk_*.msgpack' 2>/dev/null | sort | tail -n 1)
-    [[ -n "$newest" ]] && mkdir -p "$kept/checkpoints" && cp "$newest" "$kept/checkpoints/"
-  fi
-  return 0
-}
-
-run() {  # NAME SEED FLAGS...: train (or resume), evaluate, archive
-  local name=$1 seed=$2 out=runs/oc-$1-s$2
-  shift 2
-  if [[ -n "${ARCHIVE_ONLY:-}" ]]; then keep "$name" "$seed"; return 0; fi
-  if [[ ! -e "$out" && -f "$ARCHIVE/$name/seed_$seed/config.json" ]]; then
-    mkdir -p runs && cp -r "$ARCHIVE/$name/seed_$seed" "$out"   # a new machine: restore
-  fi
-  if [[ ! -f "$out/final.json" ]]; then
-    local resume=()
-    [[ -f "$out/config.json" ]] && resume=(--resume)
-    "$BIN/transam" train "${COMMON[@]}" --seed "$seed" "$@" --out "$out" "${resume[@]}"
-  fi
-  [[ -f "$out/eval_train.json" ]] || "$BIN/transam" evaluate "$out" --episodes 200
-  [[ -f "$out/eval_heldout.json" ]] || "$BIN/transam" evaluate "$out" --episodes 200 --partners heldout
-  keep "$name" "$seed"
-}
+source docs/results/scripts/train_keep.sh  # run NAME SEED FLAGS...: train, evaluate, keep
 
 for seed in $SEEDS; do run z-scale "$seed" --method transam --a2c.z-scale 0.088; done
 run no-act-dropout 0 --method transam --a2c.no-act-dropout --a2c.z-pass separate
