@@ -3,7 +3,7 @@
 # |z| 4.5 to 30-34 over the grid's 4M steps (the policy's input changes under it all along),
 # while CAIL's stays at 2.6-4.7 and CAIL learns. --a2c.z-scale 0.03 keeps CARL's z at ~0.1-1,
 # CAIL's size or under, as it did on Overcooked (overcooked_z_scale.sh). CARL_SEEDS (default
-# 0) at the grid's budget and evaluation schedule (40 evaluations of 100 episodes, 500 final
+# 0 1 2) at the grid's budget and evaluation schedule (40 evaluations of 100 episodes, 500 final
 # ones on the training and held-out partners), everything else the final defaults; archived
 # without checkpoints into docs/results/lbf/z-scale/. Resumes where it stopped; on a new
 # machine from the archive, where an unfinished run is kept with its newest checkpoint.
@@ -21,4 +21,4 @@ FINAL_EPISODES=500
 COMMON=(--env lbf --total-steps 4000000 --eval.every-episodes 2000 --eval.episodes 100)
 source docs/results/scripts/train_keep.sh  # run NAME SEED FLAGS...: train, evaluate, keep
 
-for seed in ${CARL_SEEDS-0}; do run carl-z-scale "$seed" --method carl --a2c.z-scale 0.03; done
+for seed in ${CARL_SEEDS-0 1 2}; do run carl-z-scale "$seed" --method carl --a2c.z-scale 0.03; done
