@@ -1,4 +1,4 @@
-# Sourced by the single-run studies (overcooked_z_scale.sh, lbf_z_scale.sh). `run NAME SEED
+# Sourced by the single-run studies (overcooked_z_scale.sh, carl_z_scale.sh). `run NAME SEED
 # FLAGS...` trains runs/$PREFIX-NAME-sSEED (or resumes it), evaluates it on the training and
 # the held-out partners ($FINAL_EPISODES episodes each) and keeps it in $ARCHIVE/NAME/seed_SEED
 # without checkpoints (an unfinished run with its newest one), whence a new machine restores
